@@ -1,0 +1,168 @@
+"""Typed configuration: dataclasses with defaults, loaded from YAML and validated.
+
+Every key has a default, so no file is needed. A bad file gives one
+:class:`ConfigError` whose message names the file and the key; the CLI prints it as one
+line and exits 2. The vision sections *are* the stage parameter dataclasses, so a
+threshold is defined once, next to the code that uses it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from companion.vision.corners import CornerParams
+from companion.vision.obstacles import ObstacleParams
+from companion.vision.vanishing import VPParams
+
+__all__ = [
+    "Config",
+    "ConfigError",
+    "CameraConfig",
+    "VisionConfig",
+    "HeadingConfig",
+    "PolicyConfig",
+    "load_config",
+    "from_mapping",
+]
+
+
+class ConfigError(ValueError):
+    """A configuration problem, with a one-line message naming file and key."""
+
+
+def _range(lo: float | None = None, hi: float | None = None, **kw: Any) -> dict[str, Any]:
+    return {"range": (lo, hi), **kw}
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    focal_px: float | None = field(default=None, metadata=_range(1.0, 100000.0))
+
+
+@dataclass(frozen=True)
+class VisionConfig:
+    detector: str = field(default="edlines", metadata={"choices": ("edlines", "lsd")})
+    min_segment_frac: float = field(default=0.02, metadata=_range(0.001, 0.5))
+    max_segments: int = field(default=300, metadata=_range(10, 5000))
+    vanishing: VPParams = field(default_factory=VPParams)
+    corners: CornerParams = field(default_factory=CornerParams)
+    obstacles: ObstacleParams = field(default_factory=ObstacleParams)
+
+
+@dataclass(frozen=True)
+class HeadingConfig:
+    depth_px: float | None = field(default=None, metadata=_range(1.0, 100000.0))
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    max_turn_deg: float = field(default=30.0, metadata=_range(1.0, 180.0))
+    deadband_deg: float = field(default=3.0, metadata=_range(0.0, 45.0))
+    turn_time_s: float = field(default=1.0, metadata=_range(0.05, 60.0))
+    max_yaw_rate_deg_s: float = field(default=30.0, metadata=_range(1.0, 360.0))
+
+
+@dataclass(frozen=True)
+class Config:
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    vision: VisionConfig = field(default_factory=VisionConfig)
+    heading: HeadingConfig = field(default_factory=HeadingConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+
+
+def load_config(path: str | Path | None) -> Config:
+    """The configuration in the YAML file at ``path``, or the defaults for ``None``."""
+    if path is None:
+        return Config()
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: config file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{p}: is a directory, not a config file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{p}: cannot read config file ({e.__class__.__name__})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{p}: not valid YAML{where}") from None
+    if data is None:
+        data = {}
+    return from_mapping(data, source=str(p))
+
+
+def from_mapping(data: Any, source: str = "<config>") -> Config:
+    """Build and validate a :class:`Config` from nested mappings (as parsed from YAML)."""
+    return _build(Config, data, source, "")
+
+
+def _build(cls: type, data: Any, source: str, prefix: str):
+    where = prefix.rstrip(".") or "top level"
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: {where} must be a mapping of keys, got {_show(data)}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    for key in data:
+        if key not in fields:
+            raise ConfigError(f"{source}: unknown key '{prefix}{key}'")
+    kwargs = {}
+    for name, value in data.items():
+        kwargs[name] = _value(hints[name], fields[name], value, source, f"{prefix}{name}")
+    return cls(**kwargs)
+
+
+def _value(tp: Any, f: dataclasses.Field, value: Any, source: str, key: str):
+    optional = False
+    if isinstance(tp, types.UnionType) or typing.get_origin(tp) is typing.Union:
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        optional = len(args) < len(typing.get_args(tp))
+        tp = args[0]
+    if value is None:
+        if optional:
+            return None
+        raise ConfigError(f"{source}: {key} must not be empty")
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, source, key + ".")
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{source}: {key} must be true or false, got {_show(value)}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{source}: {key} must be an integer, got {_show(value)}")
+    elif tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{source}: {key} must be a number, got {_show(value)}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(f"{source}: {key} must be a finite number, got {value}")
+    elif tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{source}: {key} must be a string, got {_show(value)}")
+        choices = f.metadata.get("choices")
+        if choices and value not in choices:
+            raise ConfigError(f"{source}: {key} must be one of {', '.join(choices)}, got {value!r}")
+        return value
+    lo, hi = f.metadata.get("range", (0.0, None))
+    if lo is None:
+        lo = 0.0
+    if value < lo or (hi is not None and value > hi):
+        bound = f"between {lo:g} and {hi:g}" if hi is not None else f"at least {lo:g}"
+        raise ConfigError(f"{source}: {key} must be {bound}, got {value:g}")
+    return value
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."

@@ -1,0 +1,56 @@
+"""The turning rule of the paper's Table II, as a pure function.
+
+| D_t      | action                     |
+|----------|----------------------------|
+| D_t < 0  | turn left by  |D_t|        |
+| D_t > 0  | turn right by |D_t|        |
+| D_t = 0  | go forward                 |
+
+with ``D_t ≈ η_t`` (eq. 11). Additions a vehicle needs: the turn per decision is capped
+at a maximum turning angle (the paper's preset maximum), ``|η|`` within a deadband counts
+as ``D_t = 0`` (η never is exactly 0 on real images), and the turn is executed as a yaw
+rate ``turn / turn_time_s`` capped at ``max_yaw_rate_deg_s``. Sign: positive yaw rate turns
+right (body FRD / NED, as PX4 and MAVSDK use).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from companion.config import PolicyConfig
+
+__all__ = ["TurnCommand", "decide_turn"]
+
+Action = Literal["left", "right", "forward", "hold"]
+
+
+@dataclass(frozen=True)
+class TurnCommand:
+    """One decision: ``action``, the signed ``turn_deg`` it asks for (right positive), and
+    the ``yaw_rate_deg_s`` that executes it."""
+
+    action: Action
+    turn_deg: float
+    yaw_rate_deg_s: float
+
+
+def decide_turn(
+    eta_deg: float | None, policy: PolicyConfig, scene_understood: bool = True
+) -> TurnCommand:
+    """Table II: η (degrees, right positive, or None) → :class:`TurnCommand`.
+
+    - no scene understanding (no layout found, e.g. a blank or blurred frame) → ``hold``:
+      nothing to act on, yaw rate 0;
+    - no non-Manhattan obstacle (``eta_deg is None``) or ``|η| <= deadband`` → ``forward``;
+    - otherwise turn toward η's side by ``min(|η|, max_turn_deg)``.
+    """
+    if not scene_understood or (eta_deg is not None and not math.isfinite(eta_deg)):
+        return TurnCommand("hold", 0.0, 0.0)
+    if eta_deg is None or abs(eta_deg) <= policy.deadband_deg:
+        return TurnCommand("forward", 0.0, 0.0)
+    turn = math.copysign(min(abs(eta_deg), policy.max_turn_deg), eta_deg)
+    rate = turn / policy.turn_time_s
+    rate = math.copysign(min(abs(rate), policy.max_yaw_rate_deg_s), turn)
+    return TurnCommand("right" if turn > 0 else "left", turn, rate)

@@ -1,0 +1,183 @@
+"""Outputs for people: the JSON-lines decision log and annotated frames.
+
+The log record is a contract (see DESIGN.md): exactly the keys of :data:`LOG_KEYS`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import IO
+
+import cv2
+import numpy as np
+
+from companion.control.policy import TurnCommand
+from companion.vision.geometry import to_pixels
+from companion.vision.pipeline import Estimate
+from companion.vision.vanishing import NONE, V1, V2, V3
+
+__all__ = ["LOG_KEYS", "log_record", "DecisionLog", "annotate", "Summary"]
+
+LOG_KEYS = (
+    "frame",
+    "t",
+    "eta_deg",
+    "phi_deg",
+    "obstacles",
+    "action",
+    "yaw_rate_deg_s",
+    "latency_ms",
+)
+
+# BGR colours: V1 red, V2 green, V3 blue, obstacle legs yellow, unassigned grey.
+_LABEL_COLOURS = {V1: (40, 40, 230), V2: (40, 200, 40), V3: (230, 120, 30), NONE: (150, 150, 150)}
+_OBSTACLE = (0, 220, 255)
+
+
+def _round(x: float | None, nd: int = 3) -> float | None:
+    return None if x is None else round(float(x), nd)
+
+
+def log_record(frame: int, t: float, est: Estimate, cmd: TurnCommand, latency_ms: float) -> dict:
+    """One JSON-lines record, keys exactly :data:`LOG_KEYS`."""
+    return {
+        "frame": int(frame),
+        "t": round(float(t), 4),
+        "eta_deg": _round(est.eta_deg),
+        "phi_deg": _round(est.phi_deg),
+        "obstacles": len(est.obstacles),
+        "action": cmd.action,
+        "yaw_rate_deg_s": round(float(cmd.yaw_rate_deg_s), 3),
+        "latency_ms": round(float(latency_ms), 3),
+    }
+
+
+class DecisionLog:
+    """Writes records as JSON lines, flushed per record so nothing is lost on a crash."""
+
+    def __init__(self, stream: IO[str]):
+        self._stream = stream
+
+    def write(self, record: dict) -> None:
+        self._stream.write(json.dumps(record, separators=(",", ":")) + "\n")
+        self._stream.flush()
+
+
+@dataclass
+class Summary:
+    """Running figures for the end-of-run summary."""
+
+    frames: int = 0
+    with_obstacle: int = 0
+    eta_min: float | None = None
+    eta_max: float | None = None
+
+    def __post_init__(self):
+        self.latencies: list[float] = []
+
+    def add(self, est: Estimate, latency_ms: float) -> None:
+        self.frames += 1
+        self.latencies.append(latency_ms)
+        if est.eta_deg is not None:
+            self.with_obstacle += 1
+            self.eta_min = est.eta_deg if self.eta_min is None else min(self.eta_min, est.eta_deg)
+            self.eta_max = est.eta_deg if self.eta_max is None else max(self.eta_max, est.eta_deg)
+
+    def lines(self, wall_s: float) -> list[str]:
+        lat = np.array(self.latencies) if self.latencies else np.zeros(1)
+        eta = f"{self.eta_min:+.1f}° … {self.eta_max:+.1f}°" if self.eta_min is not None else "none"
+        fps = self.frames / wall_s if wall_s > 0 else 0.0
+        return [
+            f"frames: {self.frames}   with obstacle: {self.with_obstacle}   η range: {eta}",
+            f"latency: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms"
+            f"   throughput: {fps:.1f} fps",
+        ]
+
+
+def _clip_point(p: np.ndarray, w: int, h: int) -> tuple[int, int]:
+    return int(np.clip(p[0], -10 * w, 11 * w)), int(np.clip(p[1], -10 * h, 11 * h))
+
+
+def _draw_vp(img: np.ndarray, vp: np.ndarray, colour, label: str) -> None:
+    """A VP inside the frame is a circle; outside (or at infinity) an arrow at the border."""
+    h, w = img.shape[:2]
+    c = np.array([w / 2.0, h / 2.0])
+    p = to_pixels(vp)
+    if p is not None and 0 <= p[0] < w and 0 <= p[1] < h:
+        cv2.circle(img, (int(p[0]), int(p[1])), 6, colour, 2, cv2.LINE_AA)
+        cv2.putText(
+            img,
+            label,
+            (int(p[0]) + 8, int(p[1]) - 8),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.45,
+            colour,
+            1,
+            cv2.LINE_AA,
+        )
+        return
+    d = (vp[:2] - vp[2] * c) * (1 if vp[2] >= 0 else -1)
+    if np.linalg.norm(d) < 1e-12:
+        return
+    d = d / np.linalg.norm(d)
+    s = min((w / 2 - 14) / max(abs(d[0]), 1e-9), (h / 2 - 14) / max(abs(d[1]), 1e-9))
+    tip = c + d * s
+    tail = tip - d * 28
+    cv2.arrowedLine(
+        img,
+        (int(tail[0]), int(tail[1])),
+        (int(tip[0]), int(tip[1])),
+        colour,
+        2,
+        cv2.LINE_AA,
+        tipLength=0.4,
+    )
+    cv2.putText(
+        img,
+        label,
+        (int(tail[0]) - 8, int(tail[1]) - 6),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        0.45,
+        colour,
+        1,
+        cv2.LINE_AA,
+    )
+
+
+def annotate(frame: np.ndarray, est: Estimate, cmd: TurnCommand | None = None) -> np.ndarray:
+    """A copy of ``frame`` with segments coloured by VP, the layout VPs, obstacle corners
+    and OVPs, and an arrow showing η (length grows with |η|)."""
+    img = frame.copy() if frame.ndim == 3 else cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+    h, w = img.shape[:2]
+    legs: set[int] = set()
+    for k in range(len(est.obstacle_corners)):
+        legs.update((int(est.obstacle_corners.s[k]), int(est.obstacle_corners.n[k])))
+    for i, seg in enumerate(est.segments):
+        colour = (
+            _OBSTACLE if i in legs else _LABEL_COLOURS.get(int(est.labels[i]), _LABEL_COLOURS[NONE])
+        )
+        cv2.line(
+            img, _clip_point(seg[:2], w, h), _clip_point(seg[2:], w, h), colour, 1, cv2.LINE_AA
+        )
+    if est.layout.observed[V1] or est.layout.observed[V3]:
+        for k, name in ((V1, "V1"), (V2, "V2"), (V3, "V3")):
+            _draw_vp(img, est.layout.vps[k], _LABEL_COLOURS[k], name)
+    for ob in est.obstacles:
+        for p in ob.corners_px:
+            cv2.circle(img, (int(p[0]), int(p[1])), 5, _OBSTACLE, 2, cv2.LINE_AA)
+        for k in (0, 1):
+            _draw_vp(img, ob.ovps[k], _OBSTACLE, f"O{k + 1}")
+    # η arrow from the centre: straight up for 0, turned by η.
+    c = (w // 2, h - 30)
+    if est.eta_deg is not None:
+        a = math.radians(est.eta_deg)
+        tip = (int(c[0] + 60 * math.sin(a)), int(c[1] - 60 * math.cos(a)))
+        cv2.arrowedLine(img, c, tip, (0, 0, 255), 3, cv2.LINE_AA, tipLength=0.25)
+    text = "eta: none" if est.eta_deg is None else f"eta {est.eta_deg:+.1f} deg"
+    if cmd is not None:
+        text += f"  {cmd.action}  {cmd.yaw_rate_deg_s:+.1f} deg/s"
+    cv2.putText(img, text, (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 3, cv2.LINE_AA)
+    cv2.putText(img, text, (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
+    return img

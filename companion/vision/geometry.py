@@ -1,0 +1,154 @@
+"""Homogeneous points and lines in the image plane.
+
+Every point and line here is a homogeneous 3-vector, so vanishing points at infinity
+(``w = 0``) and parallel segments are ordinary values: nothing divides by ``w``.
+Pixel coordinates put the centre of the top-left pixel at (0, 0), x right, y down.
+
+All functions are pure and vectorised over a leading axis where that is natural.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "segment_lines",
+    "segment_midpoints",
+    "segment_lengths",
+    "segment_directions",
+    "intersect",
+    "vp_consistency",
+    "to_pixels",
+    "direction_of",
+    "point_of",
+    "angle_between_directions_deg",
+    "principal_point",
+]
+
+
+def principal_point(width: int, height: int) -> np.ndarray:
+    """Image centre in pixels, ``((W - 1) / 2, (H - 1) / 2)``: the origin of eq. 10."""
+    return np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+
+
+def segment_midpoints(segments: np.ndarray) -> np.ndarray:
+    """Midpoints ``p`` of segments ``[x1, y1, x2, y2]`` (N×4 → N×2, pixels)."""
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    return 0.5 * (s[:, 0:2] + s[:, 2:4])
+
+
+def segment_lengths(segments: np.ndarray) -> np.ndarray:
+    """Euclidean lengths ``l`` of segments (N×4 → N, pixels)."""
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    return np.hypot(s[:, 2] - s[:, 0], s[:, 3] - s[:, 1])
+
+
+def segment_directions(segments: np.ndarray) -> np.ndarray:
+    """Unit direction vectors of segments (N×4 → N×2); zero-length segments give (0, 0)."""
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    d = s[:, 2:4] - s[:, 0:2]
+    n = np.linalg.norm(d, axis=1, keepdims=True)
+    return np.divide(d, n, out=np.zeros_like(d), where=n > 0)
+
+
+def segment_lines(segments: np.ndarray) -> np.ndarray:
+    """Homogeneous lines through segments (N×4 → N×3), scaled so that ``a² + b² = 1``.
+
+    With that scaling ``line @ [x, y, 1]`` is the signed distance in pixels from the
+    point to the line.
+    """
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    p1 = np.column_stack([s[:, 0:2], np.ones(len(s))])
+    p2 = np.column_stack([s[:, 2:4], np.ones(len(s))])
+    lines = np.cross(p1, p2)
+    n = np.hypot(lines[:, 0], lines[:, 1])[:, None]
+    return np.divide(lines, n, out=np.zeros_like(lines), where=n > 0)
+
+
+def intersect(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Intersection of homogeneous lines (or the line through two points): ``a × b``.
+
+    Parallel lines meet at a point at infinity (``w = 0``); the result is scaled to unit
+    norm so that far and infinite points stay well conditioned.
+    """
+    p = np.cross(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    n = np.linalg.norm(p, axis=-1, keepdims=True)
+    return np.divide(p, n, out=np.zeros_like(p), where=n > 0)
+
+
+def to_pixels(point: np.ndarray) -> np.ndarray | None:
+    """Pixel position ``(x, y)`` of a finite homogeneous point, ``None`` at infinity."""
+    p = np.asarray(point, dtype=float)
+    if abs(p[2]) < 1e-12 * max(1.0, float(np.abs(p[:2]).max())):
+        return None
+    return p[:2] / p[2]
+
+
+def vp_consistency(segments: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How well each segment points at a vanishing point (finite or at infinity).
+
+    For a segment with midpoint ``m`` and direction ``u`` the direction from ``m`` to the
+    homogeneous point ``v = (x, y, w)`` is ``(x, y) − w·m`` (no division by ``w``). The
+    returned angle is between ``u`` and that direction, folded to [0, 90] degrees; the
+    residual is how far, in pixels, the segment's endpoints stray from the line joining
+    its midpoint to ``v`` (``sin(angle) · length / 2``).
+
+    Returns ``(angle_deg, residual_px)``, each of shape (N,). A segment whose midpoint
+    coincides with ``v`` gets 90° (it carries no evidence for ``v``).
+    """
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    v = np.asarray(vp, dtype=float)
+    m = segment_midpoints(s)
+    to_vp = v[None, :2] - v[2] * m
+    u = s[:, 2:4] - s[:, 0:2]
+    lu = np.linalg.norm(u, axis=1)
+    lv = np.linalg.norm(to_vp, axis=1)
+    denom = lu * lv
+    ok = denom > 1e-12
+    sin = np.ones(len(s))
+    sin[ok] = np.abs(u[ok, 0] * to_vp[ok, 1] - u[ok, 1] * to_vp[ok, 0]) / denom[ok]
+    sin = np.clip(sin, 0.0, 1.0)
+    return np.degrees(np.arcsin(sin)), sin * lu / 2.0
+
+
+def direction_of(point: np.ndarray, focal_px: float, centre: np.ndarray) -> np.ndarray:
+    """Unit 3-D viewing direction ``K⁻¹ v`` of homogeneous image point(s) ``v``.
+
+    ``K`` is a pinhole with focal ``focal_px`` and principal point ``centre``; camera
+    axes are x right, y down, z forward. Works for points at infinity (``w = 0``).
+    """
+    p = np.asarray(point, dtype=float)
+    d = np.stack(
+        [
+            p[..., 0] - centre[0] * p[..., 2],
+            p[..., 1] - centre[1] * p[..., 2],
+            focal_px * p[..., 2],
+        ],
+        axis=-1,
+    )
+    n = np.linalg.norm(d, axis=-1, keepdims=True)
+    return np.divide(d, n, out=np.zeros_like(d), where=n > 0)
+
+
+def point_of(direction: np.ndarray, focal_px: float, centre: np.ndarray) -> np.ndarray:
+    """Unit homogeneous pixel point(s) ``K d`` of 3-D camera direction(s) ``d``.
+
+    The inverse of :func:`direction_of`; a direction with ``z = 0`` images at infinity.
+    """
+    d = np.asarray(direction, dtype=float)
+    p = np.stack(
+        [
+            focal_px * d[..., 0] + centre[0] * d[..., 2],
+            focal_px * d[..., 1] + centre[1] * d[..., 2],
+            d[..., 2],
+        ],
+        axis=-1,
+    )
+    n = np.linalg.norm(p, axis=-1, keepdims=True)
+    return np.divide(p, n, out=np.zeros_like(p), where=n > 0)
+
+
+def angle_between_directions_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle between undirected 3-D directions, in degrees within [0, 90]."""
+    c = np.abs(np.sum(np.asarray(a) * np.asarray(b), axis=-1))
+    return np.degrees(np.arccos(np.clip(c, 0.0, 1.0)))

@@ -1,0 +1,146 @@
+"""Frame → :class:`Estimate`: the paper's stages composed, each one timed (Fig. 1).
+
+lines (eq. 1) → layout VPs and segment labels (Fig. 2) → corner projections ranked by
+Λ (eqs. 2–4) → Table I → obstacles from corner pairs (eqs. 5–8) → M, η, φ (eqs. 9–11).
+
+The stages are pure functions; :class:`Pipeline` only holds the configured line
+detector (built once) and measures how long each stage took.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from companion.config import Config
+from companion.vision.corners import Corners, find_corners, table1_mask
+from companion.vision.geometry import principal_point
+from companion.vision.heading import closest_to_centre, heading_from_vp
+from companion.vision.lines import filter_segments, make_detector, to_gray
+from companion.vision.obstacles import Obstacle, find_obstacles
+from companion.vision.vanishing import LayoutVPs, assign_segments, detect_layout_vps
+
+__all__ = ["Estimate", "Pipeline", "STAGES"]
+
+STAGES = ("lines", "vps", "corners", "obstacles", "heading")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What one frame says.
+
+    ``eta_deg``, ``phi_deg``: eq. 10 for the primary (largest) obstacle, None if none.
+    ``m_px``: its M in centred coordinates (y up), None if none or at infinity.
+    ``obstacles``: every obstacle found, primary first. ``layout``: V1, V2, V3.
+    ``segments`` N×4 and ``labels`` N (V1 0, V2 1, V3 2, none −1); ``corners``: the
+    top-K corner projections; ``obstacle_corners``: those passing Table I.
+    ``stage_ms``: wall time per stage in milliseconds (keys :data:`STAGES`).
+    ``focal_px``: the focal length assumed; ``depth_px``: D of eq. 10.
+    """
+
+    eta_deg: float | None
+    phi_deg: float | None
+    m_px: tuple[float, float] | None
+    obstacles: tuple[Obstacle, ...]
+    layout: LayoutVPs
+    segments: np.ndarray
+    labels: np.ndarray
+    corners: Corners
+    obstacle_corners: Corners
+    width: int
+    height: int
+    focal_px: float
+    depth_px: float
+    stage_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def latency_ms(self) -> float:
+        """Total processing time of the frame, milliseconds."""
+        return float(sum(self.stage_ms.values()))
+
+    @property
+    def scene_understood(self) -> bool:
+        """Whether the layout (a vertical and a horizontal VP) was found."""
+        return self.layout.found
+
+
+class Pipeline:
+    """The configured pipeline. ``Pipeline(config)(frame) → Estimate``."""
+
+    def __init__(self, config: Config | None = None):
+        self.config = config or Config()
+        self._detectors: dict[float, object] = {}
+
+    def _detector(self, min_len: float):
+        key = round(min_len, 1)
+        if key not in self._detectors:
+            self._detectors[key] = make_detector(self.config.vision.detector, min_len)
+        return self._detectors[key]
+
+    def focal_for(self, width: int) -> float:
+        """Focal length in pixels: configured, else half the width (90° field of view)."""
+        return self.config.camera.focal_px or width / 2.0
+
+    def __call__(self, frame: np.ndarray) -> Estimate:
+        """Run every stage on a BGR or grey ``frame`` (H×W[×3] uint8)."""
+        vc = self.config.vision
+        h, w = frame.shape[:2]
+        focal = self.focal_for(w)
+        depth = self.config.heading.depth_px or focal
+        centre = principal_point(w, h)
+        ms: dict[str, float] = {}
+
+        t0 = time.perf_counter()
+        min_len = vc.min_segment_frac * float(np.hypot(w, h))
+        raw = self._detector(min_len)(to_gray(frame))
+        segments = filter_segments(raw, min_len, vc.max_segments)
+        t1 = time.perf_counter()
+        ms["lines"] = (t1 - t0) * 1e3
+
+        layout = detect_layout_vps(segments, w, h, focal, vc.vanishing)
+        labels, _ = assign_segments(segments, layout.vps, vc.vanishing)
+        t2 = time.perf_counter()
+        ms["vps"] = (t2 - t1) * 1e3
+
+        corners = find_corners(segments, labels, vc.corners)
+        strict = replace(
+            vc.vanishing,
+            max_angle_deg=vc.corners.manhattan_leg_deg,
+            residual_px=vc.corners.manhattan_leg_residual_px,
+        )
+        strict_labels, _ = assign_segments(segments, layout.vps, strict)
+        obstacle_corners = corners.take(table1_mask(corners, labels, strict_labels))
+        t3 = time.perf_counter()
+        ms["corners"] = (t3 - t2) * 1e3
+
+        obstacles = (
+            find_obstacles(segments, obstacle_corners, layout, vc.obstacles) if layout.found else []
+        )
+        t4 = time.perf_counter()
+        ms["obstacles"] = (t4 - t3) * 1e3
+
+        eta = phi = m = None
+        if obstacles:
+            ovps = obstacles[0].ovps[:2]
+            hd = heading_from_vp(ovps[closest_to_centre(ovps, centre)], centre, depth)
+            eta, phi, m = hd.eta_deg, hd.phi_deg, hd.m_px
+        ms["heading"] = (time.perf_counter() - t4) * 1e3
+
+        return Estimate(
+            eta_deg=eta,
+            phi_deg=phi,
+            m_px=m,
+            obstacles=tuple(obstacles),
+            layout=layout,
+            segments=segments,
+            labels=labels,
+            corners=corners,
+            obstacle_corners=obstacle_corners,
+            width=w,
+            height=h,
+            focal_px=focal,
+            depth_px=depth,
+            stage_ms=ms,
+        )
