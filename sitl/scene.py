@@ -612,16 +612,20 @@ def random_scene(
         return all(math.hypot(x - b.x, y - b.y) > r + b.radius() + 0.2 for b in boxes)
 
     if obstacle:
-        for _ in range(50):
+        for _ in range(200):
             dist = rng.uniform(2.2, 5.0)
             bearing = cam.yaw_deg + rng.uniform(-0.3, 0.3) * cam.hfov_deg
             x = cam.x + dist * math.cos(math.radians(bearing))
             y = cam.y + dist * math.sin(math.radians(bearing))
             rel = rng.uniform(12.0, 45.0) * rng.choice([-1, 1])
+            yaw = float(rel + 90.0 * rng.integers(0, 4))
+            # Both side faces must show: the line of sight 15°–75° off the box's axes.
+            if not 15.0 <= (yaw - bearing) % 90.0 <= 75.0:
+                continue
             b = Box(
                 x,
                 y,
-                float(rel + 90.0 * rng.integers(0, 4)),
+                yaw,
                 float(rng.uniform(0.6, 1.6)),
                 float(rng.uniform(0.4, 1.0)),
                 float(rng.uniform(0.5, 1.6)),

@@ -43,7 +43,7 @@ class CornerParams:
     min_vertical_leg_angle_deg: float = 2.5  # L_r at least this far from L_s and L_n
     leg_gap_frac: float = 0.15  # the vertical leg may stop this share of its length short
     manhattan_leg_deg: float = 1.5  # Table I: a leg is V1/V2 only if it points there this well
-    manhattan_leg_residual_px: float = 1.0  # ... and its endpoints stray at most this far
+    manhattan_leg_residual_px: float = 2.0  # ... with endpoints at most this far off its line
     top_k: int = 100  # corners kept after ranking by Λ_C (paper: top 100)
 
 

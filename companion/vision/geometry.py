@@ -21,6 +21,7 @@ __all__ = [
     "to_pixels",
     "direction_of",
     "point_of",
+    "horizon_line",
     "angle_between_directions_deg",
     "principal_point",
 ]
@@ -146,6 +147,20 @@ def point_of(direction: np.ndarray, focal_px: float, centre: np.ndarray) -> np.n
     )
     n = np.linalg.norm(p, axis=-1, keepdims=True)
     return np.divide(p, n, out=np.zeros_like(p), where=n > 0)
+
+
+def horizon_line(vertical_vp: np.ndarray, focal_px: float, centre: np.ndarray) -> np.ndarray:
+    """The horizon: image line of all directions orthogonal to the vertical VP.
+
+    ``l = K⁻ᵀ K⁻¹ v3``, returned scaled like :func:`segment_lines` (``a² + b² = 1``) so
+    that ``l · [x, y, 1]`` is a distance in pixels.
+    """
+    d = direction_of(vertical_vp, focal_px, centre)
+    line = np.array(
+        [d[0] / focal_px, d[1] / focal_px, d[2] - (centre[0] * d[0] + centre[1] * d[1]) / focal_px]
+    )
+    n = np.hypot(line[0], line[1])
+    return line / n if n > 0 else np.array([0.0, 0.0, 1.0])
 
 
 def angle_between_directions_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ from companion.vision.corners import Corners
 from companion.vision.geometry import (
     angle_between_directions_deg,
     direction_of,
+    horizon_line,
     intersect,
     point_of,
     segment_lengths,
@@ -49,6 +50,7 @@ class ObstacleParams:
     min_edge_px: float = 12.0  # corners of a pair at least this far apart
     horizon_tol_deg: float = 6.0  # λ3: OVP directions this close to horizontal (eq. 8)
     orthogonal_tol_deg: float = 20.0  # λ3: O1 ⟂ O2 within this (focal length is a guess)
+    single_corner_orthogonal_tol_deg: float = 8.0  # the same when C_h shows no leg
     non_manhattan_min_deg: float = 5.0  # OVPs at least this far from V1 and V2
     merge_deg: float = 3.0  # pairs whose OVPs agree this well are one obstacle
     member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well
@@ -80,17 +82,8 @@ def _collinearity_px(seg_a: np.ndarray, seg_b: np.ndarray) -> float:
     return float(max(np.abs(pb @ la).max(), np.abs(pa @ lb).max()))
 
 
-def _opposite_deg(corner_g, mid_g, corner_h, mid_h) -> float:
-    """λ2 (eq. 7): angle between the corner → vertical-leg-midpoint vectors, degrees."""
-    a, b = mid_g - corner_g, mid_h - corner_h
-    na, nb = np.linalg.norm(a), np.linalg.norm(b)
-    if na < 1e-9 or nb < 1e-9:
-        return 0.0
-    return float(np.degrees(np.arccos(np.clip(a @ b / (na * nb), -1.0, 1.0))))
-
-
-def _ovp_error_deg(d1, d2, d3) -> float:
-    """λ3 (eq. 8): how far O1, O2 are from horizontal, mutually orthogonal directions."""
+def _ovp_error_deg(d1, d2, d3) -> tuple[float, float]:
+    """λ3 (eq. 8) parts: how far O1, O2 are from horizontal, and from orthogonal."""
     horizon = max(
         abs(90.0 - angle_between_directions_deg(d1, d3)),
         abs(90.0 - angle_between_directions_deg(d2, d3)),
@@ -99,65 +92,142 @@ def _ovp_error_deg(d1, d2, d3) -> float:
     return float(horizon), float(ortho)
 
 
+def _far_end(g: int, corners: Corners, segments, verticals, p: ObstacleParams):
+    """The other end of corner g's vertical edge, following collinear V3 segments.
+
+    Returns (point, edge length) or None. Segments on the line of ``L_r^g`` (λ1, eq. 6)
+    count; the far end is the endpoint farthest from ``p_c`` on the side of the leg's
+    midpoint (λ2 → π, eq. 7: the partner lies the other way from its own leg).
+    """
+    pc = corners.points_px[g]
+    rg = segments[corners.r[g]]
+    u = 0.5 * (rg[:2] + rg[2:]) - pc
+    if np.linalg.norm(u) < 1e-9:
+        return None
+    u /= np.linalg.norm(u)
+    best, reach = None, 0.0
+    for v in verticals:
+        if v != corners.r[g] and _collinearity_px(rg, segments[v]) > p.collinear_px:
+            continue
+        for end in (segments[v, :2], segments[v, 2:]):
+            along = float((end - pc) @ u)
+            if along > reach:
+                best, reach = end, along
+    if best is None or reach < p.min_edge_px:
+        return None
+    return pc + reach * u, reach
+
+
 def find_obstacles(
     segments: np.ndarray,
     corners: Corners,
     layout: LayoutVPs,
+    free: np.ndarray,
+    labels: np.ndarray,
     params: ObstacleParams | None = None,
+    radius_px: float = 10.0,
+    leg_gap_frac: float = 0.15,
 ) -> list[Obstacle]:
     """Obstacles from Table-I corners, largest (tallest vertical edge) first.
 
+    For each Table-I corner ``C_g`` the vertical edge is followed to its other end
+    (eqs. 6, 7) and the non-Manhattan legs ending there form ``C_h``. With two legs this
+    is the paper's pair; a leg of ``C_h`` that the line detector missed (a thin top face,
+    low contrast against the wall) is replaced by the horizon: ``O = L^g ∩ horizon``.
+    At least one OVP must come from two real edges (``L^g × L^h``), and λ3 (eq. 8) holds.
+
     Inputs: ``segments`` N×4 pixels; ``corners`` already filtered by Table I;
-    ``layout`` the frame's layout VPs (V3 is O3; V1/V2 must differ from the OVPs).
+    ``layout`` the frame's layout VPs; ``free`` N bool, segments that may be obstacle
+    legs (not V3, not tightly V1/V2); ``labels`` N segment labels (V3 = vertical).
     Output: a list of :class:`Obstacle`, possibly empty.
     """
     p = params or ObstacleParams()
-    if len(corners) < 2:
+    if len(corners) == 0:
         return []
     s = np.asarray(segments, dtype=float).reshape(-1, 4)
     lines = segment_lines(s)
-    mids = segment_midpoints(s)
     f, c = layout.focal_px, layout.centre
     d3 = direction_of(layout.vps[V3], f, c)
+    horizon = horizon_line(layout.vps[V3], f, c)
     layout_dirs = direction_of(layout.vps[[V1, V2]], f, c)
+    verticals = np.flatnonzero(np.asarray(labels) == V3)
+    free_idx = np.flatnonzero(free)
+    ends = s.reshape(-1, 2, 2)
 
-    found: list[tuple[np.ndarray, np.ndarray, float, float, tuple[int, int]]] = []
+    found: list[tuple[np.ndarray, np.ndarray, float, float, tuple[int, ...]]] = []
     for g in range(len(corners)):
-        for h in range(g + 1, len(corners)):
-            pg, ph = corners.points_px[g], corners.points_px[h]
-            edge = float(np.linalg.norm(pg - ph))
-            if edge < p.min_edge_px:
+        far = _far_end(g, corners, s, verticals, p)
+        if far is None:
+            continue
+        e, edge = far
+        pc = corners.points_px[g]
+        axis = (e - pc) / edge
+        # Legs of C_h: free segments that meet the vertical line near e and end there.
+        vline = np.cross(np.append(pc, 1.0), np.append(e, 1.0))
+        vline /= np.hypot(vline[0], vline[1])
+        partners = []
+        for h in free_idx:
+            if h in (corners.s[g], corners.n[g]):
                 continue
-            rg, rh = corners.r[g], corners.r[h]
-            lam1 = 0.0 if rg == rh else _collinearity_px(s[rg], s[rh])
-            if lam1 > p.collinear_px:
+            q = intersect(lines[h], vline)
+            if abs(q[2]) < 1e-12:
                 continue
-            if _opposite_deg(pg, mids[rg], ph, mids[rh]) < p.opposite_deg:
+            q = q[:2] / q[2]
+            if np.linalg.norm(q - e) > radius_px + leg_gap_frac * edge:
                 continue
-            best = None
-            for a, b in (
-                (corners.s[h], corners.n[h]),
-                (corners.n[h], corners.s[h]),
-            ):
-                o1 = intersect(lines[corners.s[g]], lines[a])
-                o2 = intersect(lines[corners.n[g]], lines[b])
-                if not (np.any(o1) and np.any(o2)):
-                    continue
+            if (q - pc) @ axis < edge * 0.5:
+                continue
+            if np.linalg.norm(ends[h] - q, axis=1).min() > radius_px:
+                continue
+            partners.append(h)
+        legs_g = (corners.s[g], corners.n[g])
+        best = None
+        for h in partners:
+            for a, b in ((0, 1), (1, 0)):
+                o1 = intersect(lines[legs_g[a]], lines[h])
+                o2 = intersect(lines[legs_g[b]], horizon)
+                # The second leg of C_h, if present, replaces the horizon for O2.
+                for h2 in [None, *partners]:
+                    if h2 == h:
+                        continue
+                    if h2 is not None:
+                        o2 = intersect(lines[legs_g[b]], lines[h2])
+                    if not (np.any(o1) and np.any(o2)):
+                        continue
+                    d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
+                    hor, ortho = _ovp_error_deg(d1, d2, d3)
+                    if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg:
+                        continue
+                    sep = angle_between_directions_deg(
+                        np.vstack([d1, d2])[:, None, :], layout_dirs[None]
+                    )
+                    if sep.min() < p.non_manhattan_min_deg:
+                        continue
+                    lam3 = max(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
+                    # Two real partner legs beat one; then the smaller λ3.
+                    key = (h2 is None, lam3)
+                    if best is None or key < best[0]:
+                        best = (key, d1, d2, lam3)
+        if best is None and edge >= 2 * p.min_edge_px:
+            # C_h has no visible leg at all: both OVPs from C_g's legs on the horizon.
+            # Weaker evidence (the horizon test is then true by construction), so the
+            # orthogonality gate is tighter.
+            o1, o2 = (intersect(lines[leg], horizon) for leg in legs_g)
+            if np.any(o1) and np.any(o2):
                 d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
-                horizon, ortho = _ovp_error_deg(d1, d2, d3)
-                if horizon > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg:
-                    continue
-                lam3 = max(horizon, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
-                if best is None or lam3 < best[2]:
-                    best = (o1, o2, lam3)
-            if best is None:
-                continue
-            o1, o2, lam3 = best
-            d12 = direction_of(np.vstack([o1, o2]), f, c)
-            sep = angle_between_directions_deg(d12[:, None, :], layout_dirs[None, :, :])
-            if sep.min() < p.non_manhattan_min_deg:
-                continue
-            found.append((d12[0], d12[1], lam3, edge, (g, h)))
+                _, ortho = _ovp_error_deg(d1, d2, d3)
+                sep = angle_between_directions_deg(
+                    np.vstack([d1, d2])[:, None, :], layout_dirs[None]
+                )
+                if (
+                    ortho <= p.single_corner_orthogonal_tol_deg
+                    and sep.min() >= p.non_manhattan_min_deg
+                ):
+                    best = ((True, ortho), d1, d2, ortho)
+        if best is None:
+            continue
+        _, d1, d2, lam3 = best
+        found.append((d1, d2, lam3, edge, (g,)))
 
     if not found:
         return []

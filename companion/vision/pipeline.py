@@ -20,7 +20,7 @@ from companion.vision.geometry import principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
-from companion.vision.vanishing import LayoutVPs, assign_segments, detect_layout_vps
+from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
 __all__ = ["Estimate", "Pipeline", "STAGES"]
 
@@ -112,11 +112,23 @@ class Pipeline:
         )
         strict_labels, _ = assign_segments(segments, layout.vps, strict)
         obstacle_corners = corners.take(table1_mask(corners, labels, strict_labels))
+        free_legs = ~np.isin(strict_labels, (V1, V2)) & (labels != V3)
         t3 = time.perf_counter()
         ms["corners"] = (t3 - t2) * 1e3
 
         obstacles = (
-            find_obstacles(segments, obstacle_corners, layout, vc.obstacles) if layout.found else []
+            find_obstacles(
+                segments,
+                obstacle_corners,
+                layout,
+                free_legs,
+                labels,
+                vc.obstacles,
+                radius_px=vc.corners.radius_px,
+                leg_gap_frac=vc.corners.leg_gap_frac,
+            )
+            if layout.found
+            else []
         )
         t4 = time.perf_counter()
         ms["obstacles"] = (t4 - t3) * 1e3
