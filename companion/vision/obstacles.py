@@ -33,7 +33,6 @@ from companion.vision.geometry import (
     point_of,
     segment_lengths,
     segment_lines,
-    segment_midpoints,
     vp_consistency,
 )
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs
