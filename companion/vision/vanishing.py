@@ -58,6 +58,7 @@ class VPParams:
     max_angle_deg: float = 4.0  # and at most this angle between segment and VP direction
     vertical_max_tilt_deg: float = 25.0  # V3 candidates lean at most this far from image vertical
     vertical_hypothesis_segments: int = 30  # longest candidates whose pairs are V3 hypotheses
+    vertical_max_camera_tilt_deg: float = 35.0  # V3 within this of the camera's down axis
     histogram_bin_deg: float = 0.5
     histogram_sigma_deg: float = 1.0
     peak_min_share: float = 0.04  # a horizontal peak holds >= this share of horizontal length
@@ -132,6 +133,9 @@ def _vertical_vp(ns, lines, lengths, focal, p: VPParams):
     hyps = np.vstack([default, hyps])
     norms = np.linalg.norm(hyps, axis=1)
     hyps = hyps[norms > 1e-12] / norms[norms > 1e-12, None]
+    # The camera is never pitched or rolled this far: V3 lies near the image's y axis,
+    # far outside the frame. Converging floor lines must not pass for verticals.
+    hyps = hyps[np.abs(hyps[:, 1]) >= np.cos(np.radians(p.vertical_max_camera_tilt_deg))]
     # Score every hypothesis against every candidate at once (H × C).
     cs, cl = ns[cand], lengths[cand]
     mid = 0.5 * (cs[:, 0:2] + cs[:, 2:4])
@@ -153,7 +157,8 @@ def _vertical_vp(ns, lines, lengths, focal, p: VPParams):
         best = refined
     inl = _inliers(ns, best, focal, p)
     inl[np.setdiff1d(np.arange(len(ns)), cand)] = False
-    if np.count_nonzero(inl) < 2:
+    tilted = abs(best[1]) / np.linalg.norm(best) < np.cos(np.radians(p.vertical_max_camera_tilt_deg))
+    if np.count_nonzero(inl) < 2 or tilted:
         return default, np.zeros(len(ns), bool), False
     if best[1] < 0 or (best[1] == 0 and best[2] < 0):
         best = -best
