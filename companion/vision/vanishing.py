@@ -157,7 +157,9 @@ def _vertical_vp(ns, lines, lengths, focal, p: VPParams):
         best = refined
     inl = _inliers(ns, best, focal, p)
     inl[np.setdiff1d(np.arange(len(ns)), cand)] = False
-    tilted = abs(best[1]) / np.linalg.norm(best) < np.cos(np.radians(p.vertical_max_camera_tilt_deg))
+    tilted = abs(best[1]) / np.linalg.norm(best) < np.cos(
+        np.radians(p.vertical_max_camera_tilt_deg)
+    )
     if np.count_nonzero(inl) < 2 or tilted:
         return default, np.zeros(len(ns), bool), False
     if best[1] < 0 or (best[1] == 0 and best[2] < 0):

@@ -1,0 +1,228 @@
+"""``companion``: the command line.
+
+- ``companion --video FILE --dry-run [--log PATH] [--annotate OUT.mp4]``: the pipeline
+  and the turn policy on every frame of a recording, no autopilot.
+- ``companion eval``: accuracy on seeded synthetic scenes (see :mod:`sitl.evaluate`).
+
+A user mistake (bad file, bad config) prints one line ``companion: error: …`` and exits
+2; Ctrl-C stops cleanly, keeping the log and annotated video written so far (exit 130).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from companion.capture import CaptureError, VideoFile
+from companion.config import Config, ConfigError, load_config
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+class UserError(Exception):
+    """Something the user can fix; printed as one line."""
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="companion",
+        description="Monocular non-Manhattan obstacle avoidance (Wang & Wei 2020).",
+    )
+    ap.add_argument("--video", metavar="FILE", help="video file to process")
+    ap.add_argument("--dry-run", action="store_true", help="no autopilot: decide, do not fly")
+    ap.add_argument("--config", metavar="PATH", help="YAML config (default: built-in defaults)")
+    ap.add_argument("--log", metavar="PATH", help="write one JSON line per frame")
+    ap.add_argument("--annotate", metavar="OUT.mp4", help="write an annotated video")
+    ap.add_argument("--focal-px", type=float, metavar="F", help="known focal length in pixels")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sub = ap.add_subparsers(dest="command", metavar="{eval}")
+    ev = sub.add_parser("eval", help="accuracy on seeded synthetic scenes")
+    ev.add_argument("--scenes", type=int, default=200, help="number of scenes (default 200)")
+    ev.add_argument("--seed", type=int, default=0, help="seed of the scene set (default 0)")
+    ev.add_argument("--config", metavar="PATH", dest="eval_config", help="YAML config")
+    ev.add_argument("--width", type=int, default=640)
+    ev.add_argument("--height", type=int, default=480)
+    ev.add_argument(
+        "--no-focal",
+        action="store_true",
+        help="do not give the pipeline the rendered focal length (it assumes half the width)",
+    )
+    ev.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    ev.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
+    return ap
+
+
+class _Progress:
+    """A one-line progress bar on stderr, only when stderr is a terminal."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled and sys.stderr.isatty()
+        self._last = 0.0
+
+    def update(self, done: int, total: int, extra: str = "") -> None:
+        now = time.monotonic()
+        if not self.enabled or (now - self._last < 0.1 and done != total):
+            return
+        self._last = now
+        if total > 0:
+            filled = int(30 * min(done / total, 1.0))
+            bar = f"[{'#' * filled}{'.' * (30 - filled)}] {done}/{total}"
+        else:
+            bar = f"{done}"
+        sys.stderr.write(f"\r{bar} {extra}\033[K")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\r\033[K")
+            sys.stderr.flush()
+
+
+def _config(path: str | None, focal_px: float | None) -> Config:
+    cfg = load_config(path)
+    if focal_px is not None:
+        if not focal_px > 0:
+            raise UserError(f"--focal-px must be positive, got {focal_px:g}")
+        cfg = replace(cfg, camera=replace(cfg.camera, focal_px=focal_px))
+    return cfg
+
+
+def _open_output(path: str, what: str):
+    try:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        return open(path, "w", encoding="utf-8")
+    except OSError as e:
+        raise UserError(f"cannot write {what} {path}: {e.strerror or e}") from None
+
+
+def dry_run(args) -> int:
+    """Pipeline + policy on every frame of ``args.video``; prints a summary."""
+    import cv2
+
+    from companion.control.policy import decide_turn
+    from companion.report import DecisionLog, Summary, annotate, log_record
+    from companion.vision.pipeline import Pipeline
+
+    cfg = _config(args.config, args.focal_px)
+    pipeline = Pipeline(cfg)
+    video = VideoFile(args.video)
+    log_file = _open_output(args.log, "log") if args.log else None
+    log = DecisionLog(log_file) if log_file else None
+    writer = None
+    if args.annotate:
+        Path(args.annotate).parent.mkdir(parents=True, exist_ok=True)
+        writer = cv2.VideoWriter(
+            args.annotate, cv2.VideoWriter_fourcc(*"mp4v"), video.fps, (video.width, video.height)
+        )
+        if not writer.isOpened():
+            video.close()
+            raise UserError(f"cannot write annotated video {args.annotate}")
+    focal = pipeline.focal_for(video.width)
+    source = "given" if cfg.camera.focal_px else "assumed: half the frame width, 90° field of view"
+    print(
+        f"{video.path}: {video.width}×{video.height}, {len(video) or 'unknown'} frames at "
+        f"{video.fps:.1f} fps; focal {focal:.0f} px ({source})"
+    )
+    summary = Summary()
+    progress = _Progress(not args.no_progress)
+    interrupted = False
+    start = time.perf_counter()
+    try:
+        for frame in video:
+            t0 = time.perf_counter()
+            est = pipeline(frame.image)
+            cmd = decide_turn(est.eta_deg, cfg.policy, est.scene_understood)
+            latency_ms = (time.perf_counter() - t0) * 1e3
+            summary.add(est, latency_ms)
+            if log:
+                log.write(log_record(frame.index, frame.t_s, est, cmd, latency_ms))
+            if writer is not None:
+                writer.write(annotate(frame.image, est, cmd))
+            eta = "η —" if est.eta_deg is None else f"η {est.eta_deg:+.1f}°"
+            progress.update(frame.index + 1, len(video), f"{eta} {cmd.action}")
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        progress.close()
+        video.close()
+        if writer is not None:
+            writer.release()
+        if log_file:
+            log_file.close()
+    wall = time.perf_counter() - start
+    for line in summary.lines(wall):
+        print(line)
+    if args.log:
+        print(f"log: {args.log}")
+    if args.annotate:
+        print(f"annotated video: {args.annotate}")
+    if interrupted:
+        print("interrupted: outputs hold every frame processed so far", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return 0
+
+
+def run_eval(args) -> int:
+    """``companion eval``: render seeded scenes, print the accuracy figures."""
+    from sitl.evaluate import format_report
+    from sitl.evaluate import run_eval as evaluate
+
+    if args.scenes < 1:
+        raise UserError("--scenes must be at least 1")
+    cfg = _config(args.eval_config, None)
+    progress = _Progress(True)
+    start = time.perf_counter()
+    try:
+        report = evaluate(
+            scenes=args.scenes,
+            seed=args.seed,
+            config=cfg,
+            width=args.width,
+            height=args.height,
+            assume_focal=not args.no_focal,
+            workers=args.workers,
+            progress=lambda d, n: progress.update(d, n, "scenes"),
+        )
+    finally:
+        progress.close()
+    for line in format_report(report):
+        print(line)
+    print(
+        f"({time.perf_counter() - start:.0f} s; `companion eval --scenes {args.scenes} --seed {args.seed}`)"
+    )
+    if args.json:
+        with _open_output(args.json, "figures") as f:
+            json.dump(report.figures(), f, indent=2)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = _parser()
+    args = ap.parse_args(argv)
+    try:
+        if args.command == "eval":
+            return run_eval(args)
+        if args.video is None:
+            ap.print_usage(sys.stderr)
+            raise UserError("nothing to do: give --video FILE --dry-run, or a command (eval)")
+        if not args.dry_run:
+            raise UserError(
+                "--video needs --dry-run: a recording cannot fly the vehicle "
+                "(live control will be `companion run`)"
+            )
+        return dry_run(args)
+    except (UserError, ConfigError, CaptureError) as e:
+        print(f"companion: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
