@@ -192,9 +192,8 @@ def run_eval(args) -> int:
         progress.close()
     for line in format_report(report):
         print(line)
-    print(
-        f"({time.perf_counter() - start:.0f} s; `companion eval --scenes {args.scenes} --seed {args.seed}`)"
-    )
+    took = time.perf_counter() - start
+    print(f"({took:.0f} s; companion eval --scenes {args.scenes} --seed {args.seed})")
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(report.figures(), f, indent=2)

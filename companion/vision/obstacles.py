@@ -7,7 +7,8 @@ a rotated box standing on the floor. It is accepted when
   the largest distance in pixels of one leg's endpoints from the other's line; 0 when
   both corners share one vertical segment);
 - eq. 7, ``λ2 → π``: the vectors from each corner point to the midpoint of its vertical
-  leg point in opposite directions (one corner above, one below);
+  leg point in opposite directions (one corner above, one below); here by construction:
+  ``C_h`` is searched only at the far end of ``C_g``'s vertical edge;
 - eq. 8, ``λ3 → 0``: the horizontal legs meet at obstacle VPs ``O1 = L_s^g × L_s^h`` and
   ``O2 = L_n^g × L_n^h`` (``O3`` = V3) that are consistent with a box on the floor: both
   on the horizon, at a right angle to each other, and away from the layout VPs V1, V2
@@ -45,7 +46,6 @@ class ObstacleParams:
     """Thresholds of eqs. 6–8 and of obstacle grouping."""
 
     collinear_px: float = 3.0  # λ1 gate (eq. 6)
-    opposite_deg: float = 150.0  # λ2 gate: at least this angle (eq. 7)
     min_edge_px: float = 12.0  # corners of a pair at least this far apart
     horizon_tol_deg: float = 6.0  # λ3: OVP directions this close to horizontal (eq. 8)
     orthogonal_tol_deg: float = 20.0  # λ3: O1 ⟂ O2 within this (focal length is a guess)

@@ -1,0 +1,186 @@
+"""The public CLI, run as a real process on real encoded videos."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import pytest
+
+from companion.report import LOG_KEYS
+
+ROOT = Path(__file__).resolve().parents[1]
+EXE = [sys.executable, "-m", "companion.cli"]
+
+
+def run(*args, timeout=120):
+    return subprocess.run(
+        [*EXE, *map(str, args)], capture_output=True, text=True, timeout=timeout, cwd=ROOT
+    )
+
+
+def read_log(path):
+    return [json.loads(line) for line in Path(path).read_text().splitlines()]
+
+
+def test_dry_run_writes_exact_log_records(sample_video, tmp_path):
+    video, truth_path = sample_video
+    log = tmp_path / "log.jsonl"
+    r = run("--video", video, "--dry-run", "--log", log, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    records = read_log(log)
+    truth = [json.loads(line) for line in truth_path.read_text().splitlines()]
+    assert len(records) == len(truth) == 6
+    for i, (rec, tru) in enumerate(zip(records, truth, strict=True)):
+        assert tuple(rec) == LOG_KEYS
+        assert rec["frame"] == i
+        assert rec["t"] == pytest.approx(i / 10.0)
+        assert rec["action"] in {"left", "right", "forward", "hold"}
+        # The box is to the right of the heading in every frame: turn right.
+        assert tru["obstacles"][0]["eta_deg"] > 0
+        if rec["eta_deg"] is not None:
+            assert rec["eta_deg"] > 0
+            assert rec["yaw_rate_deg_s"] > 0
+            assert rec["action"] == "right"
+    assert sum(rec["eta_deg"] is not None for rec in records) >= 5
+    assert "frames: 6" in r.stdout
+    assert "latency: median" in r.stdout
+    assert "Traceback" not in r.stderr
+
+
+def test_focal_px_is_reported_and_used(sample_video, tmp_path):
+    video, _ = sample_video
+    log_a, log_b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
+    assert run("--video", video, "--dry-run", "--log", log_a).returncode == 0
+    r = run("--video", video, "--dry-run", "--log", log_b, "--focal-px", "640")
+    assert "focal 640 px (given)" in r.stdout
+    a = [x["eta_deg"] for x in read_log(log_a) if x["eta_deg"] is not None]
+    b = [x["eta_deg"] for x in read_log(log_b) if x["eta_deg"] is not None]
+    # A longer D of eq. 10 gives smaller angles of the same sign.
+    assert a and b and max(b) < max(a)
+
+
+def test_annotate_writes_every_frame(sample_video, tmp_path):
+    video, _ = sample_video
+    out = tmp_path / "ann.mp4"
+    r = run("--video", video, "--dry-run", "--annotate", out)
+    assert r.returncode == 0, r.stderr
+    cap = cv2.VideoCapture(str(out))
+    frames = 0
+    while cap.read()[0]:
+        frames += 1
+    assert frames == 6
+
+
+def test_blank_video_holds(blank_video, tmp_path):
+    log = tmp_path / "log.jsonl"
+    assert run("--video", blank_video, "--dry-run", "--log", log).returncode == 0
+    recs = read_log(log)
+    assert recs and all(r["action"] == "hold" and r["yaw_rate_deg_s"] == 0 for r in recs)
+
+
+def _assert_one_line_error(r, needle):
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert lines[-1].startswith("companion: error: "), r.stderr
+    assert needle in lines[-1]
+    assert "Traceback" not in r.stderr
+
+
+def test_missing_file(tmp_path):
+    _assert_one_line_error(run("--video", tmp_path / "nope.mp4", "--dry-run"), "video not found")
+
+
+def test_zero_byte_file(tmp_path):
+    p = tmp_path / "empty.mp4"
+    p.write_bytes(b"")
+    _assert_one_line_error(run("--video", p, "--dry-run"), "empty (0 bytes)")
+
+
+def test_text_file_named_mp4(tmp_path):
+    p = tmp_path / "notes.mp4"
+    p.write_text("this is not a video\n" * 50)
+    _assert_one_line_error(run("--video", p, "--dry-run"), "not a video OpenCV can decode")
+
+
+def test_directory(tmp_path):
+    _assert_one_line_error(run("--video", tmp_path, "--dry-run"), "is a directory")
+
+
+def test_unreadable_and_bad_configs(sample_video, tmp_path):
+    video, _ = sample_video
+    _assert_one_line_error(
+        run("--video", video, "--dry-run", "--config", tmp_path / "none.yaml"),
+        "config file not found",
+    )
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("policy:\n  max_turn: 10\n")
+    _assert_one_line_error(
+        run("--video", video, "--dry-run", "--config", bad), "unknown key 'policy.max_turn'"
+    )
+    if os.geteuid() != 0:  # root reads anything
+        locked = tmp_path / "locked.yaml"
+        locked.write_text("policy: {}\n")
+        locked.chmod(0)
+        _assert_one_line_error(
+            run("--video", video, "--dry-run", "--config", locked), "cannot read config"
+        )
+
+
+def test_video_without_dry_run_refuses(sample_video):
+    _assert_one_line_error(run("--video", sample_video[0]), "needs --dry-run")
+
+
+def test_nothing_to_do():
+    _assert_one_line_error(run(), "nothing to do")
+
+
+def test_ctrl_c_keeps_what_was_written(tmp_path):
+    # A longer real video so that the run is still going when SIGINT arrives.
+    from sitl.sample import sample_scene
+    from sitl.scene import write_video, yaw_sweep
+
+    scene, cam = sample_scene()
+    video = tmp_path / "long.mp4"
+    write_video(scene, yaw_sweep(cam, 0.0, 30.0, 3), video, 10.0)
+    # Loop the 3 frames into a long file cheaply by re-writing them.
+    cap = cv2.VideoCapture(str(video))
+    frames = [f for ok, f in iter(lambda: cap.read(), (False, None)) if ok]
+    long = tmp_path / "longer.mp4"
+    w = cv2.VideoWriter(str(long), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, (640, 480))
+    for i in range(400):
+        w.write(frames[i % 3])
+    w.release()
+    log = tmp_path / "log.jsonl"
+    p = subprocess.Popen(
+        [*EXE, "--video", str(long), "--dry-run", "--log", str(log)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and (not log.exists() or log.stat().st_size < 300):
+        time.sleep(0.05)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=30)
+    assert p.returncode == 130, err
+    assert "Traceback" not in err
+    recs = read_log(log)  # every line is complete JSON
+    assert 1 <= len(recs) < 400
+    assert "frames:" in out
+
+
+def test_eval_prints_figures(tmp_path):
+    js = tmp_path / "fig.json"
+    r = run("eval", "--scenes", "3", "--workers", "1", "--json", js, timeout=300)
+    assert r.returncode == 0, r.stderr
+    for name in ("η error median", "detection rate", "false-positive rate", "corner error"):
+        assert name in r.stdout
+    fig = json.loads(js.read_text())
+    assert fig["scenes"] == 3
+    assert fig["detectable"] + fig["manhattan_only"] + fig["not_detectable"] == 3

@@ -1,0 +1,39 @@
+"""Table II: η → left / right / forward, the cap, the deadband, the yaw rate."""
+
+import math
+
+import pytest
+
+from companion.config import PolicyConfig
+from companion.control.policy import decide_turn
+
+P = PolicyConfig(max_turn_deg=30.0, deadband_deg=3.0, turn_time_s=1.0, max_yaw_rate_deg_s=25.0)
+
+
+def test_positive_eta_turns_right_with_positive_yaw_rate():
+    cmd = decide_turn(12.0, P)
+    assert (cmd.action, cmd.turn_deg, cmd.yaw_rate_deg_s) == ("right", 12.0, 12.0)
+
+
+def test_negative_eta_turns_left():
+    cmd = decide_turn(-10.0, P)
+    assert (cmd.action, cmd.turn_deg, cmd.yaw_rate_deg_s) == ("left", -10.0, -10.0)
+
+
+def test_turn_capped_at_max_turn_angle_and_rate_capped():
+    cmd = decide_turn(76.43, P)
+    assert cmd.turn_deg == 30.0
+    assert cmd.yaw_rate_deg_s == 25.0
+    assert decide_turn(-80.0, P).turn_deg == -30.0
+
+
+@pytest.mark.parametrize("eta", [0.0, 2.9, -3.0, None])
+def test_deadband_and_no_obstacle_go_forward(eta):
+    cmd = decide_turn(eta, P)
+    assert (cmd.action, cmd.yaw_rate_deg_s) == ("forward", 0.0)
+
+
+def test_no_scene_understanding_or_nan_holds():
+    assert decide_turn(20.0, P, scene_understood=False).action == "hold"
+    assert decide_turn(math.nan, P).action == "hold"
+    assert decide_turn(math.nan, P).yaw_rate_deg_s == 0.0

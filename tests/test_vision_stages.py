@@ -1,0 +1,147 @@
+"""Per-stage tests on constructed geometry: layout VPs, corners (eqs. 3-4), Table I."""
+
+import numpy as np
+import pytest
+
+from companion.vision.corners import CornerParams, find_corners, integrity, table1_mask
+from companion.vision.geometry import angle_between_directions_deg, direction_of, to_pixels
+from companion.vision.vanishing import NONE, V1, V2, V3, assign_segments, detect_layout_vps
+
+W, H, F = 640, 480, 320.0
+C = np.array([(W - 1) / 2, (H - 1) / 2])
+
+
+def _toward(vp_px, starts, length):
+    """Segments starting at ``starts`` pointing at the finite VP ``vp_px``, stopping short."""
+    out = []
+    for s in starts:
+        d = np.asarray(vp_px, float) - s
+        d /= np.linalg.norm(d)
+        out.append([*s, *(s + length * d)])
+    return np.array(out)
+
+
+def _room_segments(rng):
+    v1 = np.array([C[0] + 120.0, C[1]])  # LMVP right of centre
+    # V2 ⟂ V1 for a level camera with focal F: x2 = cx - F² / (x1 - cx).
+    v2 = np.array([C[0] - F**2 / 120.0, C[1]])
+
+    def away_from(vp, n):
+        a = rng.uniform(0, 2 * np.pi, n)
+        return vp + rng.uniform(150, 300, (n, 1)) * np.column_stack([np.cos(a), np.sin(a)])
+
+    to_v1 = _toward(v1, away_from(v1, 25), 80)
+    to_v2 = _toward(v2, np.column_stack([rng.uniform(0, W, 15), rng.uniform(0, H, 15)]), 80)
+    xs = rng.uniform(20, W - 20, 12)
+    verticals = np.column_stack([xs, np.full(12, 100.0), xs, np.full(12, 300.0)])
+    return np.vstack([to_v1, to_v2, verticals]), v1, v2
+
+
+def test_layout_vps_found_with_v3_at_infinity():
+    segs, v1, v2 = _room_segments(np.random.default_rng(1))
+    layout = detect_layout_vps(segs, W, H, F)
+    assert layout.observed == (True, True, True)
+    assert to_pixels(layout.vps[V1]) == pytest.approx(v1, abs=1.0)
+    assert to_pixels(layout.vps[V2]) == pytest.approx(v2, rel=0.01)
+    # Exactly parallel verticals: V3 at (or numerically at) infinity, straight down.
+    d3 = direction_of(layout.vps[V3], F, C)
+    assert angle_between_directions_deg(d3, np.array([0.0, 1.0, 0.0])) < 0.5
+    labels, _ = assign_segments(segs, layout.vps)
+    assert list(labels[:25]) == [V1] * 25
+    assert list(labels[25:40]) == [V2] * 15
+    assert list(labels[40:]) == [V3] * 12
+
+
+def test_lmvp_is_the_better_supported_horizontal_vp():
+    segs, v1, v2 = _room_segments(np.random.default_rng(2))
+    # Give V2's family far more support than V1's: it must become the LMVP.
+    more = _toward(v2, np.random.default_rng(3).uniform([0, 0], [W, H], (40, 2)), 120)
+    layout = detect_layout_vps(np.vstack([segs, more]), W, H, F)
+    assert to_pixels(layout.vps[V1]) == pytest.approx(v2, rel=0.01)
+
+
+def test_layout_without_segments_is_not_found_and_finite():
+    layout = detect_layout_vps(np.empty((0, 4)), W, H, F)
+    assert not layout.found
+    assert np.all(np.isfinite(layout.vps))
+    labels, _ = assign_segments(np.empty((0, 4)), layout.vps)
+    assert labels.shape == (0,)
+
+
+def test_only_parallel_segments_do_not_crash():
+    segs = np.array([[0, y, 200, y] for y in range(10, 400, 20)], float)
+    layout = detect_layout_vps(segs, W, H, F)
+    assert np.all(np.isfinite(layout.vps))
+    d = direction_of(layout.vps[V1], F, C)
+    assert angle_between_directions_deg(d, np.array([1.0, 0, 0])) < 1.0
+
+
+def test_converging_floor_lines_are_not_taken_for_verticals():
+    # Steep lines converging just below the centre (a floor seen from above).
+    vp = np.array([C[0], C[1] + 40])
+    floor = _toward(vp, np.column_stack([np.linspace(150, 490, 15), np.full(15, 479.0)]), 150)
+    layout = detect_layout_vps(floor, W, H, F)
+    v3 = layout.vps[V3]
+    far = to_pixels(v3) is None or np.linalg.norm(to_pixels(v3) - C) > F
+    assert far
+
+
+def test_integrity_is_zero_when_legs_end_at_the_corner():
+    pc = np.array([[10.0, 10.0]])
+    mids = np.array([[[20.0, 10.0], [10.0, 30.0], [0.0, 5.0]]])
+    lengths = np.array([[20.0, 40.0, np.hypot(20, 10)]])
+    assert integrity(pc, mids[:, :2], lengths[:, :2]) == pytest.approx([0.0])
+    assert integrity(pc, mids, lengths) == pytest.approx([0.0])
+
+
+def test_integrity_grows_with_the_gap():
+    pc = np.array([[0.0, 0.0]])
+    # A leg ending 5 px short of the corner, and one crossing it by 5 px.
+    mids = np.array([[[15.0, 0.0], [0.0, 5.0]]])
+    lengths = np.array([[20.0, 20.0]])
+    assert integrity(pc, mids, lengths) == pytest.approx([5.0 + 5.0])
+
+
+def _box_corner(gap=0.0):
+    # Corner at (300, 300): two horizontal-ish legs and a vertical leg upward.
+    return np.array(
+        [
+            [300 + gap, 300, 400, 280],  # L_s
+            [300 - gap, 300, 220, 285],  # L_n
+            [300, 300 - gap, 300, 150],  # L_r
+        ],
+        float,
+    )
+
+
+def test_find_corners_ranks_clean_corner_first():
+    segs = np.vstack([_box_corner(), _box_corner(gap=4.0) + [150, 0, 150, 0]])
+    labels = np.array([NONE, NONE, V3, NONE, NONE, V3])
+    corners = find_corners(segs, labels)
+    assert len(corners) == 2
+    assert corners.points_px[0] == pytest.approx([300, 300], abs=1e-6)
+    assert corners.lambda_c[0] == pytest.approx(0.0, abs=1e-6)
+    assert corners.lambda_lp[1] == pytest.approx(
+        8.0, abs=0.3
+    )  # eq. 3: two ~4-px gaps (slanted legs)
+    # eq. 4 adds the vertical leg's gap: it stops 4 px short of (300, 300) and the legs'
+    # slant moves p_c by under 2 px more.
+    assert 4.0 <= corners.lambda_c[1] - corners.lambda_lp[1] <= 6.0
+    assert set(corners.take(np.array([0])).r.tolist()) == {2}
+
+
+def test_find_corners_needs_a_vertical_leg_and_honours_top_k():
+    segs = _box_corner()
+    assert len(find_corners(segs, np.array([NONE, NONE, NONE]))) == 0
+    many = np.vstack([_box_corner() + [dx, 0, dx, 0] for dx in range(-280, 300, 40)])
+    labels = np.tile([NONE, NONE, V3], len(many) // 3)
+    assert len(find_corners(many, labels, CornerParams(top_k=5))) == 5
+
+
+def test_table1_keeps_only_non_manhattan_horizontal_legs_on_a_vertical():
+    segs = _box_corner()
+    corners = find_corners(segs, np.array([NONE, NONE, V3]))
+    assert table1_mask(corners, np.array([NONE, NONE, V3]), np.array([NONE, NONE, V3])).all()
+    # A leg that points tightly at V1 makes it a Manhattan (room) corner.
+    assert not table1_mask(corners, np.array([V1, NONE, V3]), np.array([V1, NONE, V3])).any()
+    assert not table1_mask(corners, np.array([NONE, V2, V3]), np.array([NONE, V2, V3])).any()
