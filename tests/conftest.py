@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from sitl.sample import sample_scene
-from sitl.scene import Camera, write_video, yaw_sweep
+from sitl.scene import write_video, yaw_sweep
 
 
 @pytest.fixture(scope="session")
@@ -26,6 +26,3 @@ def blank_video(tmp_path_factory):
         w.write(np.full((240, 320, 3), 128, np.uint8))
     w.release()
     return path
-
-
-__all__ = ["Camera"]

@@ -61,7 +61,8 @@ class Obstacle:
 
     ``ovps``: 3×3 unit homogeneous pixel points O1, O2, O3 (O3 = V3).
     ``corners_px``: K×2 corner projections that belong to it.
-    ``pairs``: number of corner pairs (eqs. 5–8) supporting it.
+    ``pairs``: number of Table-I corners whose vertical edge led to a consistent partner
+    (a full pair, a partner with one leg, or no visible partner leg) supporting it.
     ``height_px``: longest vertical edge between paired corners (a size/nearness proxy).
     ``lambda3_deg``: the best pair's λ3 (eq. 8).
     """
