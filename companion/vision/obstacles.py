@@ -118,6 +118,31 @@ def _far_end(g: int, corners: Corners, segments, verticals, p: ObstacleParams):
     return pc + reach * u, reach
 
 
+def _partner_legs(cand, lines, ends, vline, pc, e, edge, reach_px, radius_px) -> np.ndarray:
+    """Segments among ``cand`` that end on the vertical line near its far end ``e``.
+
+    A leg's line must cross ``vline`` within ``reach_px`` of ``e``, on the far half of
+    the edge from ``pc``, and the leg must end within ``radius_px`` of that crossing.
+    """
+    if len(cand) == 0:
+        return cand
+    q_h = intersect(lines[cand], vline)
+    w = q_h[:, 2]
+    ok = np.abs(w) >= 1e-12
+    q = np.divide(q_h[:, :2], w[:, None], out=np.zeros((len(cand), 2)), where=ok[:, None])
+    axis = (e - pc) / edge
+    ok &= np.linalg.norm(q - e, axis=1) <= reach_px
+    ok &= (q - pc) @ axis >= edge * 0.5
+    ok &= np.linalg.norm(ends[cand] - q[:, None, :], axis=2).min(axis=1) <= radius_px
+    return cand[ok]
+
+
+def _off_layout(d1, d2, layout_dirs, p: ObstacleParams) -> bool:
+    """Both OVP directions at least ``non_manhattan_min_deg`` from V1 and V2."""
+    sep = angle_between_directions_deg(np.vstack([d1, d2])[:, None, :], layout_dirs[None])
+    return bool(sep.min() >= p.non_manhattan_min_deg)
+
+
 def find_obstacles(
     segments: np.ndarray,
     corners: Corners,
@@ -161,47 +186,37 @@ def find_obstacles(
             continue
         e, edge = far
         pc = corners.points_px[g]
-        axis = (e - pc) / edge
         # Legs of C_h: free segments that meet the vertical line near e and end there.
         vline = np.cross(np.append(pc, 1.0), np.append(e, 1.0))
         vline /= np.hypot(vline[0], vline[1])
-        partners = []
-        for h in free_idx:
-            if h in (corners.s[g], corners.n[g]):
-                continue
-            q = intersect(lines[h], vline)
-            if abs(q[2]) < 1e-12:
-                continue
-            q = q[:2] / q[2]
-            if np.linalg.norm(q - e) > radius_px + leg_gap_frac * edge:
-                continue
-            if (q - pc) @ axis < edge * 0.5:
-                continue
-            if np.linalg.norm(ends[h] - q, axis=1).min() > radius_px:
-                continue
-            partners.append(h)
+        partners = _partner_legs(
+            free_idx[~np.isin(free_idx, (corners.s[g], corners.n[g]))],
+            lines,
+            ends,
+            vline,
+            pc,
+            e,
+            edge,
+            radius_px + leg_gap_frac * edge,
+            radius_px,
+        )
         legs_g = (corners.s[g], corners.n[g])
         best = None
         for h in partners:
             for a, b in ((0, 1), (1, 0)):
                 o1 = intersect(lines[legs_g[a]], lines[h])
-                o2 = intersect(lines[legs_g[b]], horizon)
-                # The second leg of C_h, if present, replaces the horizon for O2.
+                # O2 from the second leg of C_h if there is one, else from the horizon.
                 for h2 in [None, *partners]:
                     if h2 == h:
                         continue
-                    if h2 is not None:
-                        o2 = intersect(lines[legs_g[b]], lines[h2])
+                    o2 = intersect(lines[legs_g[b]], horizon if h2 is None else lines[h2])
                     if not (np.any(o1) and np.any(o2)):
                         continue
                     d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
                     hor, ortho = _ovp_error_deg(d1, d2, d3)
                     if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg:
                         continue
-                    sep = angle_between_directions_deg(
-                        np.vstack([d1, d2])[:, None, :], layout_dirs[None]
-                    )
-                    if sep.min() < p.non_manhattan_min_deg:
+                    if not _off_layout(d1, d2, layout_dirs, p):
                         continue
                     lam3 = max(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
                     # Two real partner legs beat one; then the smaller λ3.
@@ -216,12 +231,8 @@ def find_obstacles(
             if np.any(o1) and np.any(o2):
                 d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
                 _, ortho = _ovp_error_deg(d1, d2, d3)
-                sep = angle_between_directions_deg(
-                    np.vstack([d1, d2])[:, None, :], layout_dirs[None]
-                )
-                if (
-                    ortho <= p.single_corner_orthogonal_tol_deg
-                    and sep.min() >= p.non_manhattan_min_deg
+                if ortho <= p.single_corner_orthogonal_tol_deg and _off_layout(
+                    d1, d2, layout_dirs, p
                 ):
                     best = ((True, ortho), d1, d2, ortho)
         if best is None:

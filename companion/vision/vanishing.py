@@ -135,7 +135,8 @@ def _vertical_vp(ns, lines, lengths, focal, p: VPParams):
     hyps = hyps[norms > 1e-12] / norms[norms > 1e-12, None]
     # The camera is never pitched or rolled this far: V3 lies near the image's y axis,
     # far outside the frame. Converging floor lines must not pass for verticals.
-    hyps = hyps[np.abs(hyps[:, 1]) >= np.cos(np.radians(p.vertical_max_camera_tilt_deg))]
+    min_cos = np.cos(np.radians(p.vertical_max_camera_tilt_deg))
+    hyps = hyps[np.abs(hyps[:, 1]) >= min_cos]
     # Score every hypothesis against every candidate at once (H × C).
     cs, cl = ns[cand], lengths[cand]
     mid = 0.5 * (cs[:, 0:2] + cs[:, 2:4])
@@ -157,9 +158,7 @@ def _vertical_vp(ns, lines, lengths, focal, p: VPParams):
         best = refined
     inl = _inliers(ns, best, focal, p)
     inl[np.setdiff1d(np.arange(len(ns)), cand)] = False
-    tilted = abs(best[1]) / np.linalg.norm(best) < np.cos(
-        np.radians(p.vertical_max_camera_tilt_deg)
-    )
+    tilted = abs(best[1]) / np.linalg.norm(best) < min_cos
     if np.count_nonzero(inl) < 2 or tilted:
         return default, np.zeros(len(ns), bool), False
     if best[1] < 0 or (best[1] == 0 and best[2] < 0):
