@@ -1,0 +1,173 @@
+"""The mock autopilot alone, driven by a plain pymavlink client over loopback UDP.
+
+These pin down the PX4 behaviour the MAVSDK integration tests rely on (PX4-NOTES.md):
+mode encoding, truthful acks, the offboard entry and loss rules, robustness to junk.
+"""
+
+import socket
+import time
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl.autopilot import HOLD, OFFBOARD, POSCTL, RTL, AutopilotParams, MockAutopilot, Px4Mode
+
+
+class Client:
+    """A ground station on 127.0.0.1:port: receives everything the mock sends there."""
+
+    def __init__(self):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.05)
+        self.port = self.sock.getsockname()[1]
+        self.mav = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)
+        self.parser = mavlink.MAVLink(None)
+        self.peer = None
+        self.inbox = []
+
+    def recv(self, kind: str, timeout_s: float = 2.0, where=lambda m: True):
+        """The first message of ``kind`` (oldest first) matching ``where``, or None."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            for i, msg in enumerate(self.inbox):
+                if msg.get_type() == kind and where(msg):
+                    return self.inbox.pop(i)
+            if time.monotonic() >= deadline:
+                return None
+            try:
+                data, self.peer = self.sock.recvfrom(65535)
+            except TimeoutError:
+                continue
+            self.inbox += [m for m in self.parser.parse_buffer(data) or []
+                           if m.get_type() not in ("ATTITUDE", "LOCAL_POSITION_NED",
+                                                   "GLOBAL_POSITION_INT")]
+
+    def send(self, msg) -> None:
+        assert self.peer is not None, "receive something first, to learn the mock's port"
+        self.sock.sendto(msg.pack(self.mav), self.peer)
+
+    def command(self, cmd: int, *params: float, target=(1, 1)):
+        p = [*params, 0, 0, 0, 0, 0, 0, 0][:7]
+        self.send(self.mav.command_long_encode(*target, cmd, 0, *p))
+        ack = self.recv("COMMAND_ACK", 1.0, where=lambda m: m.command == cmd)
+        return None if ack is None else ack.result
+
+    def setpoint(self, yaw_rate_rad_s: float = 0.0) -> None:
+        self.send(self.mav.set_position_target_local_ned_encode(
+            0, 1, 1, mavlink.MAV_FRAME_BODY_NED, 1479, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+            yaw_rate_rad_s))
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+@pytest.fixture
+def client():
+    c = Client()
+    yield c
+    c.close()
+
+
+def start(client, **params) -> MockAutopilot:
+    ap = MockAutopilot(client.port, AutopilotParams(**params)).start()
+    assert client.recv("HEARTBEAT") is not None, "the mock must send to 127.0.0.1:PORT"
+    return ap
+
+
+def set_mode(client, mode: Px4Mode) -> int:
+    return client.command(mavlink.MAV_CMD_DO_SET_MODE, 1, mode.main, mode.sub)
+
+
+def test_heartbeat_is_a_px4_quadrotor_with_mode_and_armed_flag(client):
+    with start(client, boot_in_air=True):
+        hb = client.recv("HEARTBEAT")
+        assert hb.autopilot == mavlink.MAV_AUTOPILOT_PX4
+        assert hb.type == mavlink.MAV_TYPE_QUADROTOR
+        assert hb.get_srcSystem() == 1 and hb.get_srcComponent() == 1
+        assert hb.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        assert Px4Mode.from_custom_mode(hb.custom_mode) == HOLD
+        assert hb.custom_mode == (4 << 16) | (3 << 24)
+
+
+def test_commands_get_truthful_acks(client):
+    with start(client, arm_ready_s=0.6) as ap:
+        assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == \
+            mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # estimator not ready yet
+        assert client.command(mavlink.MAV_CMD_NAV_TAKEOFF) == mavlink.MAV_RESULT_DENIED
+        time.sleep(0.7)
+        assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1) == \
+            mavlink.MAV_RESULT_ACCEPTED
+        assert ap.vehicle.armed
+        assert client.command(31999) == mavlink.MAV_RESULT_UNSUPPORTED
+        assert client.command(mavlink.MAV_CMD_REQUEST_MESSAGE,
+                              mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION) == 0
+        version = client.recv("AUTOPILOT_VERSION")
+        assert version.capabilities & mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+
+
+def test_offboard_needs_a_setpoint_stream_in_the_air(client):
+    with start(client, boot_in_air=True) as ap:
+        # As PX4 does: accepted, but the mode does not change.
+        assert set_mode(client, OFFBOARD) == mavlink.MAV_RESULT_ACCEPTED
+        time.sleep(0.3)
+        assert ap.mode == HOLD
+        for _ in range(3):
+            client.setpoint()
+            time.sleep(0.1)
+        assert set_mode(client, OFFBOARD) == mavlink.MAV_RESULT_ACCEPTED
+        assert ap.wait_for(lambda: ap.mode == OFFBOARD, 0.5)
+
+
+def test_setpoint_loss_fails_safe_after_com_of_loss_t(client):
+    with start(client, boot_in_air=True, com_of_loss_t_s=0.6) as ap:
+        client.setpoint(0.5)
+        time.sleep(0.05)
+        client.setpoint(0.5)
+        assert set_mode(client, OFFBOARD) == 0
+        t_last = time.monotonic()
+        client.setpoint(0.5)
+        assert ap.wait_for(lambda: ap.mode != OFFBOARD, 2.0)
+        lost_after = ap.mode_changes[-1][0] - t_last
+        assert ap.mode == RTL
+        assert 0.55 <= lost_after <= 0.9
+        assert client.recv("STATUSTEXT", 1.0) is not None
+
+
+def test_body_yaw_rate_turns_the_vehicle_and_every_setpoint_is_recorded(client):
+    with start(client, boot_in_air=True) as ap:
+        client.setpoint(0.0)
+        assert set_mode(client, OFFBOARD) == 0
+        y0, t0 = ap.yaw_deg, time.monotonic()
+        while time.monotonic() - t0 < 1.5:
+            client.setpoint(-0.349066)  # -20 deg/s: turn left
+            time.sleep(0.05)
+        turned = ap.yaw_deg - y0
+        assert -32.0 < turned < -24.0  # 1.5 s at 20 deg/s minus the 0.2 s lag
+        recorded = ap.setpoints_since(t0)
+        assert len(recorded) >= 25
+        assert all(s.frame == mavlink.MAV_FRAME_BODY_NED and s.type_mask == 1479
+                   for s in recorded)
+        assert recorded[-1].yaw_rate_deg_s == pytest.approx(-20.0, abs=0.01)
+
+
+def test_pilot_switch_wins_over_offboard(client):
+    with start(client, boot_in_air=True) as ap:
+        client.setpoint()
+        assert set_mode(client, OFFBOARD) == 0
+        ap.pilot_set_mode(POSCTL)
+        hb = client.recv("HEARTBEAT", 1.5, where=lambda m: m.custom_mode == POSCTL.custom_mode)
+        assert hb is not None
+
+
+def test_junk_and_wrong_targets_are_ignored_without_crashing(client):
+    with start(client, boot_in_air=True) as ap:
+        client.recv("HEARTBEAT")
+        client.sock.sendto(b"\xfd\x09garbage that is not mavlink" * 4, client.peer)
+        client.sock.sendto(b"", client.peer)
+        assert client.command(mavlink.MAV_CMD_NAV_LAND, target=(7, 1)) is None
+        assert client.command(mavlink.MAV_CMD_NAV_LAND, target=(1, 99)) is None
+        assert ap.mode == HOLD
+        # still alive and answering
+        assert client.command(mavlink.MAV_CMD_NAV_LAND) == mavlink.MAV_RESULT_ACCEPTED
+        assert ap.wait_for(lambda: ap.mode.sub == 6, 0.5)
