@@ -71,11 +71,31 @@ class PolicyConfig:
 
 
 @dataclass(frozen=True)
+class MavlinkConfig:
+    url: str = "udpin://127.0.0.1:14540"
+    connect_timeout_s: float = field(default=10.0, metadata=_range(0.1, 3600.0))
+
+
+@dataclass(frozen=True)
+class OffboardConfig:
+    enabled: bool = False
+    setpoint_rate_hz: float = field(default=20.0, metadata=_range(2.5, 100.0))
+    stale_after_s: float = field(default=0.5, metadata=_range(0.05, 10.0))
+    hold_after_s: float = field(default=3.0, metadata=_range(0.1, 60.0))
+    confirm_timeout_s: float = field(default=3.0, metadata=_range(0.5, 30.0))
+    retry_after_s: float = field(default=5.0, metadata=_range(0.5, 300.0))
+    eta_report_hz: float = field(default=4.0, metadata=_range(0.0, 50.0))
+    sim_arm_and_takeoff: bool = False
+
+
+@dataclass(frozen=True)
 class Config:
     camera: CameraConfig = field(default_factory=CameraConfig)
     vision: VisionConfig = field(default_factory=VisionConfig)
     heading: HeadingConfig = field(default_factory=HeadingConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
+    mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
+    offboard: OffboardConfig = field(default_factory=OffboardConfig)
 
 
 def load_config(path: str | Path | None) -> Config:

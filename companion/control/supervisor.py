@@ -1,0 +1,170 @@
+"""When the companion may command the vehicle, and what yaw rate it sends: a pure state machine.
+
+No MAVSDK, sockets or clocks here: :func:`supervise` takes the previous state, what the
+vehicle reports, the newest vision decision and the time, and returns the next state, the
+setpoint to stream and the offboard request to make. ``control/offboard.py`` is the shell
+that feeds it and carries its answers out over MAVLink.
+
+States::
+
+    disabled ──enable()──► waiting ──armed, in air, vision fresh──► engaging ──OFFBOARD in
+       ▲                     ▲  ▲                                      │       heartbeat
+       │                     │  └──not confirmed in confirm_timeout_s──┘          ▼
+       └── pilot/failsafe left OFFBOARD, vision stalled > hold_after_s,  ◄──── active
+           link lost while engaged (needs enable() again: never a silent resume)
+
+``link_lost`` is entered from any state while the autopilot is not connected.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Literal
+
+from companion.config import OffboardConfig, PolicyConfig
+from companion.control.policy import TurnCommand
+
+__all__ = [
+    "Decision", "Step", "SupervisorState", "VehicleStatus", "enable", "initial_state", "supervise",
+    "yaw_rate_setpoint",
+]
+
+StateName = Literal["disabled", "waiting", "engaging", "active", "link_lost"]
+# start: zero setpoint, then ask for OFFBOARD. stop: zero, then ask for Hold.
+# release: stop streaming without any mode change (the pilot or a failsafe owns the mode).
+Request = Literal["start", "stop", "release"] | None
+
+
+@dataclass(frozen=True)
+class VehicleStatus:
+    """What the autopilot reports (heartbeat and EXTENDED_SYS_STATE)."""
+
+    connected: bool
+    armed: bool = False
+    in_air: bool = False
+    offboard: bool = False  # the heartbeat's mode is OFFBOARD
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The newest turn decision from the vision pipeline, made at ``t_s`` (monotonic s)."""
+
+    t_s: float
+    command: TurnCommand
+    eta_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class SupervisorState:
+    name: StateName
+    enabled: bool  # the latch: cleared by every release, set again only by enable()
+    vision_fresh: bool = False
+    start_t_s: float | None = None  # when offboard was last requested
+    engaged_before_loss: bool = False
+
+
+@dataclass(frozen=True)
+class Step:
+    """One tick's answer: the next state, whether to stream a setpoint and which yaw rate,
+    an offboard start/stop to request, and the state-change messages for the pilot."""
+
+    state: SupervisorState
+    stream: bool
+    yaw_rate_deg_s: float
+    request: Request
+    events: tuple[str, ...]
+
+
+def initial_state(config: OffboardConfig) -> SupervisorState:
+    return SupervisorState("waiting" if config.enabled else "disabled", config.enabled)
+
+
+def yaw_rate_setpoint(decision: Decision | None, now_s: float, stale_after_s: float,
+                      policy: PolicyConfig) -> float:
+    """Yaw rate (deg/s, right positive) to fly at ``now_s`` for the newest decision.
+
+    The decision's rate, clamped to ``max_yaw_rate_deg_s``, flown only until its turn
+    (clamped to ``max_turn_deg``, Table II's cap) is complete; then 0. A decision older
+    than ``stale_after_s`` gives 0 at once, so a stalled camera never leaves a turn flying.
+    """
+    if decision is None:
+        return 0.0
+    age_s = now_s - decision.t_s
+    rate = decision.command.yaw_rate_deg_s
+    if age_s > stale_after_s or rate == 0.0 or not math.isfinite(rate):
+        return 0.0
+    rate = math.copysign(min(abs(rate), policy.max_yaw_rate_deg_s), rate)
+    turn_deg = min(abs(decision.command.turn_deg), policy.max_turn_deg)
+    return rate if age_s * abs(rate) < turn_deg else 0.0
+
+
+def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision | None,
+              now_s: float, config: OffboardConfig, policy: PolicyConfig) -> Step:
+    """Advance the state machine by one tick (module docstring has the diagram)."""
+    events: list[str] = []
+    age_s = math.inf if decision is None else now_s - decision.t_s
+    fresh = age_s <= config.stale_after_s
+    engaged = prev.name in ("engaging", "active")
+    if fresh != prev.vision_fresh and (engaged or fresh):
+        events.append("vision recovered" if fresh else "vision stalled: yaw rate 0")
+    state = replace(prev, vision_fresh=fresh)
+
+    def step(name: StateName, stream=False, rate=0.0, request: Request = None, **kw) -> Step:
+        if name != prev.name and name in ("waiting", "disabled") and prev.name == "link_lost":
+            events.append("autopilot link restored" + (
+                ": offboard stays off until re-enabled" if name == "disabled" else ""))
+        return Step(replace(state, name=name, **kw), stream, rate, request, tuple(events))
+
+    if not vehicle.connected:
+        if prev.name == "link_lost":
+            return step("link_lost")
+        events.append("autopilot link lost")
+        # Stop MAVSDK's own resending; never resume silently after the link returns.
+        return step("link_lost", request="release" if engaged else None,
+                    enabled=prev.enabled and not engaged, engaged_before_loss=engaged)
+    if prev.name == "link_lost":
+        return step("waiting" if prev.enabled else "disabled", engaged_before_loss=False)
+
+    if prev.name == "active":
+        if not vehicle.offboard:
+            events.append("offboard left by pilot or failsafe: released until re-enabled")
+            return step("disabled", request="release", enabled=False)
+        if not vehicle.in_air:
+            events.append("landed: offboard released")
+            return step("waiting", request="stop")
+        if age_s > config.hold_after_s:
+            events.append("vision stalled: Hold, released until re-enabled")
+            return step("disabled", request="stop", enabled=False)
+        return step("active", stream=True,
+                    rate=yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy))
+
+    if prev.name == "engaging":
+        if vehicle.offboard:
+            events.append("offboard engaged")
+            return step("active", stream=True,
+                        rate=yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy))
+        waited = now_s - (prev.start_t_s if prev.start_t_s is not None else now_s)
+        if waited > config.confirm_timeout_s or not (vehicle.armed and vehicle.in_air):
+            events.append("offboard not confirmed by the autopilot; will retry")
+            return step("waiting", request="release")
+        return step("engaging", stream=True)  # zero until OFFBOARD shows in the heartbeat
+
+    if prev.name == "waiting":
+        if not prev.enabled:
+            return step("disabled")
+        retry_ok = prev.start_t_s is None or now_s - prev.start_t_s >= config.retry_after_s
+        if vehicle.armed and vehicle.in_air and fresh and retry_ok:
+            events.append("requesting offboard")
+            return step("engaging", stream=True, request="start", start_t_s=now_s)
+        return step("waiting")
+
+    return step("waiting" if prev.enabled else "disabled")
+
+
+def enable(state: SupervisorState) -> SupervisorState:
+    """Re-arm the latch after a release (pilot's or operator's explicit act)."""
+    if state.enabled:
+        return state
+    return replace(state, enabled=True,
+                   name="waiting" if state.name == "disabled" else state.name)

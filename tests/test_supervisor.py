@@ -1,0 +1,104 @@
+"""The offboard state machine and the yaw-rate budget, on values alone (no MAVSDK)."""
+
+import pytest
+
+from companion.config import OffboardConfig, PolicyConfig
+from companion.control.policy import TurnCommand
+from companion.control.supervisor import (
+    Decision,
+    SupervisorState,
+    VehicleStatus,
+    enable,
+    initial_state,
+    supervise,
+    yaw_rate_setpoint,
+)
+
+CFG = OffboardConfig(enabled=True, stale_after_s=0.5, hold_after_s=3.0, confirm_timeout_s=3.0,
+                     retry_after_s=5.0)
+POLICY = PolicyConfig(max_turn_deg=30.0, max_yaw_rate_deg_s=30.0)
+FLYING = VehicleStatus(connected=True, armed=True, in_air=True)
+IN_OFFBOARD = VehicleStatus(connected=True, armed=True, in_air=True, offboard=True)
+RIGHT = TurnCommand("right", 20.0, 20.0)
+
+
+def run(state, vehicle, decision, now):
+    return supervise(state, vehicle, decision, now, CFG, POLICY)
+
+
+def active_state():
+    return SupervisorState("active", True, vision_fresh=True, start_t_s=0.0)
+
+
+def test_disabled_by_default_and_never_streams():
+    state = initial_state(OffboardConfig())
+    step = run(state, IN_OFFBOARD, Decision(10.0, RIGHT), 10.0)
+    assert step.state.name == "disabled" and not step.stream and step.request is None
+
+
+def test_engages_only_armed_in_air_with_fresh_vision():
+    state = initial_state(CFG)
+    assert run(state, VehicleStatus(True, armed=True), Decision(1.0, RIGHT), 1.0).request is None
+    assert run(state, FLYING, None, 1.0).request is None
+    assert run(state, FLYING, Decision(0.0, RIGHT), 1.0).request is None  # stale
+    step = run(state, FLYING, Decision(1.0, RIGHT), 1.0)
+    assert step.request == "start" and step.state.name == "engaging"
+    assert step.stream and step.yaw_rate_deg_s == 0.0  # zero before OFFBOARD is confirmed
+
+
+def test_confirmed_only_by_the_heartbeat_then_turns():
+    engaging = run(initial_state(CFG), FLYING, Decision(1.0, RIGHT), 1.0).state
+    still = run(engaging, FLYING, Decision(1.5, RIGHT), 1.5)
+    assert still.state.name == "engaging" and still.yaw_rate_deg_s == 0.0
+    active = run(engaging, IN_OFFBOARD, Decision(1.5, RIGHT), 1.5)
+    assert active.state.name == "active" and active.yaw_rate_deg_s == 20.0
+    assert "offboard engaged" in active.events
+    timeout = run(engaging, FLYING, Decision(4.5, RIGHT), 4.5)
+    assert timeout.state.name == "waiting" and timeout.request == "release"
+    retry_too_soon = run(timeout.state, FLYING, Decision(5.0, RIGHT), 5.0)
+    assert retry_too_soon.request is None
+    assert run(timeout.state, FLYING, Decision(6.0, RIGHT), 6.0).request == "start"
+
+
+def test_pilot_leaving_offboard_releases_without_a_mode_command_and_latches():
+    step = run(active_state(), FLYING, Decision(2.0, RIGHT), 2.0)
+    assert step.state.name == "disabled" and not step.state.enabled
+    assert step.request == "release" and not step.stream
+    again = run(step.state, FLYING, Decision(9.0, RIGHT), 9.0)
+    assert again.state.name == "disabled" and again.request is None
+    rearmed = enable(again.state)
+    assert run(rearmed, FLYING, Decision(9.0, RIGHT), 9.0).request == "start"
+
+
+def test_vision_stall_zero_first_then_hold():
+    decision = Decision(1.0, RIGHT)
+    assert run(active_state(), IN_OFFBOARD, decision, 1.2).yaw_rate_deg_s == 20.0
+    stalled = run(active_state(), IN_OFFBOARD, decision, 1.6)
+    assert stalled.stream and stalled.yaw_rate_deg_s == 0.0 and stalled.request is None
+    assert "vision stalled: yaw rate 0" in stalled.events
+    held = run(stalled.state, IN_OFFBOARD, decision, 4.1)
+    assert held.request == "stop" and held.state.name == "disabled"
+
+
+def test_link_loss_never_resumes_silently():
+    lost = run(active_state(), VehicleStatus(connected=False), Decision(2.0, RIGHT), 2.0)
+    assert lost.state.name == "link_lost" and lost.request == "release" and not lost.stream
+    back = run(lost.state, FLYING, Decision(3.0, RIGHT), 3.0)
+    assert back.state.name == "disabled" and back.request is None
+    # Not engaged when the link dropped: nothing to latch.
+    idle_lost = run(initial_state(CFG), VehicleStatus(connected=False), None, 1.0)
+    assert run(idle_lost.state, FLYING, None, 2.0).state.name == "waiting"
+
+
+@pytest.mark.parametrize(("age_s", "expected"), [(0.0, 20.0), (0.4, 20.0), (0.6, 0.0)])
+def test_yaw_rate_zero_when_the_decision_is_stale(age_s, expected):
+    assert yaw_rate_setpoint(Decision(10.0, RIGHT), 10.0 + age_s, 0.5, POLICY) == expected
+
+
+def test_one_decision_turns_at_most_the_cap():
+    huge = Decision(0.0, TurnCommand("left", -90.0, -90.0))
+    long_lived = 100.0
+    rates = [yaw_rate_setpoint(huge, t / 100, long_lived, POLICY) for t in range(300)]
+    assert min(rates) == -30.0  # rate capped
+    assert sum(rates) / 100 == pytest.approx(-30.0, abs=0.31)  # turn capped at 30°
+    assert rates[-1] == 0.0
