@@ -145,3 +145,58 @@ def test_table1_keeps_only_non_manhattan_horizontal_legs_on_a_vertical():
     # A leg that points tightly at V1 makes it a Manhattan (room) corner.
     assert not table1_mask(corners, np.array([V1, NONE, V3]), np.array([V1, NONE, V3])).any()
     assert not table1_mask(corners, np.array([NONE, V2, V3]), np.array([NONE, V2, V3])).any()
+
+
+def _project(points_cam):
+    """Pinhole projection of camera-frame points (x right, y down, z forward), focal F."""
+    p = np.asarray(points_cam, float)
+    return np.column_stack([C[0] + F * p[:, 0] / p[:, 2], C[1] + F * p[:, 1] / p[:, 2]])
+
+
+def _outline_of_rotated_box(yaw_deg):
+    """Image outline of a tall box standing 4 m ahead, rotated ``yaw_deg`` about vertical.
+
+    Only the silhouette: the two outer vertical edges and the top and bottom edges of the
+    two visible faces. The vertical edge between the faces is left out, as when both
+    faces are equally dark, so every corner has two legs only. Returns the segments and
+    the true OVP directions of the two faces.
+    """
+    a = np.radians(yaw_deg)
+    u = np.array([np.cos(a), 0.0, np.sin(a)])  # the face directions on the floor
+    v = np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.2, 1.2, 4.0])  # bottom corner nearest the camera; floor 1.2 m down
+    left, right = front - 0.8 * u, front - 0.8 * v
+    up = np.array([0.0, -2.4, 0.0])  # taller than the camera: its top face is hidden
+    if _project([left])[0, 0] > _project([right])[0, 0]:
+        left, right = right, left
+    b = _project([left, front, right])
+    t = _project([left + up, front + up, right + up])
+    segs = np.array([
+        [*b[0], *t[0]], [*b[2], *t[2]],  # outer vertical edges
+        [*t[0], *t[1]], [*t[1], *t[2]], [*b[0], *b[1]], [*b[1], *b[2]],
+    ])
+    return segs, [u, v]
+
+
+def test_obstacle_from_two_leg_corners_of_its_outline():
+    from companion.vision.obstacles import find_obstacles
+    from companion.vision.vanishing import LayoutVPs
+
+    segs, faces = _outline_of_rotated_box(35.0)
+    layout = LayoutVPs(
+        vps=np.array([[C[0], C[1], 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+        observed=(True, True, True), support_px=np.ones(3), focal_px=F, centre=C)
+    labels = np.array([V3, V3, NONE, NONE, NONE, NONE])
+    corners = find_corners(segs, labels, CornerParams())
+    assert len(corners.take(table1_mask(corners, labels, labels))) == 0  # no 3-leg corner
+    found = find_obstacles(segs, corners.take(np.zeros(len(corners), bool)), layout,
+                           labels == NONE, labels)
+    assert len(found) == 1
+    ovp_dirs = direction_of(found[0].ovps[:2], F, C)
+    for face in faces:
+        assert angle_between_directions_deg(ovp_dirs, face[None, :]).min() < 0.5
+    # Same outline, box aligned with the room: its legs are Manhattan, no obstacle.
+    segs_m, _ = _outline_of_rotated_box(0.0001)
+    labels_m = assign_segments(segs_m, layout.vps)[0]
+    assert find_obstacles(segs_m, corners.take(np.zeros(len(corners), bool)), layout,
+                          ~np.isin(labels_m, (V1, V2, V3)), labels_m) == []

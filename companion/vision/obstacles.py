@@ -167,9 +167,9 @@ def find_obstacles(
     Output: a list of :class:`Obstacle`, possibly empty.
     """
     p = params or ObstacleParams()
-    if len(corners) == 0:
-        return []
     s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    if len(s) == 0:
+        return []
     lines = segment_lines(s)
     f, c = layout.focal_px, layout.centre
     d3 = direction_of(layout.vps[V3], f, c)
@@ -179,7 +179,8 @@ def find_obstacles(
     free_idx = np.flatnonzero(free)
     ends = s.reshape(-1, 2, 2)
 
-    found: list[tuple[np.ndarray, np.ndarray, float, float, tuple[int, ...]]] = []
+    # (d1, d2, λ3, edge length, corner indices, extra leg segments, extra corner points)
+    found: list[tuple] = []
     for g in range(len(corners)):
         far = _far_end(g, corners, s, verticals, p)
         if far is None:
@@ -238,8 +239,13 @@ def find_obstacles(
         if best is None:
             continue
         _, d1, d2, lam3 = best
-        found.append((d1, d2, lam3, edge, (g,)))
+        found.append((d1, d2, lam3, edge, (g,), (), np.empty((0, 2))))
 
+    # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
+    edges = _edge_legs(s, verticals, free_idx, ends, p, radius_px, leg_gap_frac)
+    found += _pair_halves(_silhouette_halves(edges, lines, d3, layout_dirs, f, c, p), d3, p)
+    if not found:
+        found += _edge_horizon_pairs(edges, lines, horizon, d3, layout_dirs, f, c, p)
     if not found:
         return []
     groups = _group_by_ovps(found, p.merge_deg)
@@ -281,8 +287,11 @@ def _obstacle(members, found, segments, corners: Corners, layout: LayoutVPs, p) 
     lengths = segment_lengths(segments)
     ref1, ref2 = found[members[0]][0], found[members[0]][1]
     paired = sorted({k for m in members for k in found[m][4]})
+    extra_legs = [k for m in members for k in found[m][5]]
+    extra_points = np.vstack([found[m][6] for m in members] + [np.empty((0, 2))])
     # Refit each OVP on the horizontal legs of the paired corners that point at it.
-    legs = np.unique(np.concatenate([corners.s[paired], corners.n[paired]]))
+    legs = np.unique(np.concatenate([corners.s[paired], corners.n[paired], extra_legs])
+                     ).astype(int)
     fitted = []
     for ref in (ref1, ref2):
         ref_px = point_of(ref, f, c)
@@ -300,7 +309,7 @@ def _obstacle(members, found, segments, corners: Corners, layout: LayoutVPs, p) 
     # Further Table-I corners whose legs point at O1 and O2 join the obstacle (λ3).
     joined = list(paired)
     for k in range(len(corners)):
-        if k in paired:
+        if k in paired or len(paired) == 0:
             continue
         a_s, _ = vp_consistency(segments[[corners.s[k]]], o1)
         a_n, _ = vp_consistency(segments[[corners.n[k]]], o2)
@@ -310,8 +319,161 @@ def _obstacle(members, found, segments, corners: Corners, layout: LayoutVPs, p) 
             joined.append(k)
     return Obstacle(
         ovps=np.vstack([o1, o2, o3]),
-        corners_px=corners.points_px[joined],
+        corners_px=_unique_points(np.vstack([corners.points_px[joined], extra_points])),
         pairs=len(members),
         height_px=max(found[m][3] for m in members),
         lambda3_deg=min(found[m][2] for m in members),
     )
+
+
+def _unique_points(points: np.ndarray, tol_px: float = 3.0) -> np.ndarray:
+    keep: list[np.ndarray] = []
+    for q in points:
+        if all(np.linalg.norm(q - k) > tol_px for k in keep):
+            keep.append(q)
+    return np.array(keep).reshape(-1, 2)
+
+
+def _vertical_chains(s, verticals, p: ObstacleParams, radius_px, leg_gap_frac):
+    """Vertical edges: V3 segments joined with collinear ones (λ1, eq. 6) across small gaps.
+
+    Returns a list of (end_a, end_b, length) with the two extreme endpoints.
+    """
+    chains, seen = [], set()
+    if len(verticals) == 0:
+        return chains
+    lines = segment_lines(s[verticals])
+    lengths = segment_lengths(s[verticals])
+    pts_h = np.concatenate([s[verticals].reshape(-1, 2, 2), np.ones((len(verticals), 2, 1))], 2)
+    # Distance of the shorter segment's endpoints from the longer one's line: a short
+    # piece's own direction is too noisy to extrapolate along a long edge.
+    dist = np.abs(np.einsum("ik,jek->ije", lines, pts_h)).max(axis=2)
+    shorter_from_longer = np.where(lengths[:, None] >= lengths[None, :], dist, dist.T)
+    for iv, v in enumerate(verticals):
+        members = [v] + [w for jw, w in enumerate(verticals)
+                         if w != v and shorter_from_longer[iv, jw] <= p.collinear_px]
+        key = frozenset(members)
+        if key in seen:
+            continue
+        seen.add(key)
+        # Measure along the longest member: its direction is the most accurate.
+        base = max(members, key=lambda m: lengths[np.searchsorted(verticals, m)])
+        origin = s[base, :2]
+        axis = s[base, 2:] - origin
+        axis /= max(np.linalg.norm(axis), 1e-9)
+        pts = s[members].reshape(-1, 2)
+        t = (pts - origin) @ axis
+        # Grow from segment v along the axis while the gaps stay small.
+        spans = sorted((min(t[2 * i], t[2 * i + 1]), max(t[2 * i], t[2 * i + 1]))
+                        for i in range(len(members)))
+        lo, hi = min(t[0], t[1]), max(t[0], t[1])  # segment v itself
+        for a, b in spans + spans[::-1]:
+            gap = radius_px + leg_gap_frac * (hi - lo)
+            if a <= hi + gap and b >= lo - gap:
+                lo, hi = min(lo, a), max(hi, b)
+        if hi - lo >= 2 * p.min_edge_px:
+            chains.append((origin + lo * axis, origin + hi * axis, hi - lo))
+    return chains
+
+
+def _edge_legs(s, verticals, free_idx, ends, p: ObstacleParams, radius_px, leg_gap_frac):
+    """Vertical edges with the non-Manhattan legs that end at each of their two ends.
+
+    Returns a list of (end_a, end_b, length, legs_a, legs_b); a leg is (segment index,
+    side): the side (±1) of the edge it leaves toward. Legs are at least 20° off the edge.
+    """
+    out = []
+    if len(free_idx) == 0:
+        return out
+    for end_a, end_b, length in _vertical_chains(s, verticals, p, radius_px, leg_gap_frac):
+        axis = (end_b - end_a) / length
+        both = []
+        for end in (end_a, end_b):
+            dist = np.linalg.norm(ends[free_idx] - end[None, None, :], axis=2)
+            near = dist.min(axis=1) <= radius_px
+            legs = []
+            for k, j in zip(free_idx[near], np.argmin(dist[near], axis=1), strict=True):
+                away = ends[k, 1 - j] - ends[k, j]
+                norm = np.linalg.norm(away)
+                if norm < p.min_edge_px:
+                    continue
+                cross = float(axis[0] * away[1] - axis[1] * away[0]) / norm
+                if abs(cross) >= np.sin(np.radians(20.0)):
+                    legs.append((int(k), np.sign(cross)))
+            both.append(legs)
+        if both[0] or both[1]:
+            out.append((end_a, end_b, length, both[0], both[1]))
+    return out
+
+
+def _silhouette_halves(edges, lines, d3, layout_dirs, f, c, p: ObstacleParams):
+    """One OVP from each vertical edge whose two ends both show a leg on the same side.
+
+    A box's outline edge (and any vertical edge with one face hidden) gives corners of
+    two legs only: the vertical edge and one horizontal edge at each end. When the two
+    horizontal edges bound one face they are parallel in space and meet at that face's
+    OVP (eqs. 6–8 with one leg per corner), which must lie on the horizon and away from
+    V1 and V2. Returns a list of (direction, edge length, legs, corner points).
+    """
+    halves = []
+    for end_a, end_b, length, legs_a, legs_b in edges:
+        for ka, sa in legs_a:
+            for kb, sb in legs_b:
+                if sa != sb:
+                    continue
+                o = intersect(lines[ka], lines[kb])
+                if not np.any(o):
+                    continue
+                d = direction_of(o, f, c)
+                horizon = abs(90.0 - angle_between_directions_deg(d, d3))
+                sep = angle_between_directions_deg(d[None], layout_dirs).min()
+                if horizon <= p.horizon_tol_deg and sep >= p.non_manhattan_min_deg:
+                    halves.append((d, length, (ka, kb), np.vstack([end_a, end_b])))
+    return halves
+
+
+def _edge_horizon_pairs(edges, lines, horizon, d3, layout_dirs, f, c, p: ObstacleParams):
+    """A leg at each end of one vertical edge whose horizon crossings are orthogonal OVPs.
+
+    The fallback for an edge whose two legs bound two different faces (a box seen from
+    above its top, its faces too alike for the edge between them to show): each leg's OVP
+    is where it crosses the horizon, and only the tight ``single_corner_orthogonal_tol_deg``
+    separates a box from chance, as for a single corner. One leg must be at each end:
+    two legs at one end may be a rug's corner touching a door frame.
+    """
+    found = []
+    for end_a, end_b, length, legs_a, legs_b in edges:
+        if length < 2 * p.min_edge_px or not (legs_a and legs_b):
+            continue
+        best = None
+        for ka, _ in legs_a:
+            for kb, _ in legs_b:
+                if ka == kb:
+                    continue
+                o = intersect(lines[[ka, kb]], horizon[None, :])
+                if not np.all(np.any(o != 0, axis=1)):
+                    continue
+                da, db = direction_of(o, f, c)
+                _, ortho = _ovp_error_deg(da, db, d3)
+                if ortho <= p.single_corner_orthogonal_tol_deg and _off_layout(
+                        da, db, layout_dirs, p) and (best is None or ortho < best[0]):
+                    best = (ortho, da, db, ka, kb)
+        if best is not None:
+            ortho, da, db, ka, kb = best
+            found.append((da, db, ortho, length, (), (ka, kb), np.vstack([end_a, end_b])))
+    return found
+
+
+def _pair_halves(halves, d3, p: ObstacleParams) -> list[tuple]:
+    """Two silhouette OVPs at a right angle (λ3, eq. 8) make an obstacle hypothesis."""
+    found = []
+    for i in range(len(halves)):
+        for j in range(i + 1, len(halves)):
+            (d1, len1, legs1, pts1), (d2, len2, legs2, pts2) = halves[i], halves[j]
+            hor, ortho = _ovp_error_deg(d1, d2, d3)
+            if ortho > p.orthogonal_tol_deg:
+                continue
+            lam3 = max(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
+            found.append((d1, d2, lam3, max(len1, len2), (), legs1 + legs2,
+                          np.vstack([pts1, pts2])))
+    return found
