@@ -2,6 +2,8 @@
 
 - ``companion --video FILE --dry-run [--log PATH] [--annotate OUT.mp4]``: the pipeline
   and the turn policy on every frame of a recording, no autopilot.
+- ``companion run [--config PATH] [--source SRC]``: the service on the vehicle
+  (see :mod:`companion.service`).
 - ``companion eval``: accuracy on seeded synthetic scenes (see :mod:`sitl.evaluate`).
 
 A user mistake (bad file, bad config) prints one line ``companion: error: …`` and exits
@@ -40,7 +42,13 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--annotate", metavar="OUT.mp4", help="write an annotated video")
     ap.add_argument("--focal-px", type=float, metavar="F", help="known focal length in pixels")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
-    sub = ap.add_subparsers(dest="command", metavar="{eval}")
+    sub = ap.add_subparsers(dest="command", metavar="{run,eval}")
+    rn = sub.add_parser("run", help="the service: camera → pipeline → PX4 offboard")
+    rn.add_argument("--config", metavar="PATH", dest="run_config",
+                    help="YAML config (default: built-in defaults, offboard disabled)")
+    rn.add_argument("--source", metavar="SRC",
+                    help="camera index or /dev path, video file or image folder "
+                         "(default: camera.device from the config)")
     ev = sub.add_parser("eval", help="accuracy on seeded synthetic scenes")
     ev.add_argument("--scenes", type=int, default=200, help="number of scenes (default 200)")
     ev.add_argument("--seed", type=int, default=0, help="seed of the scene set (default 0)")
@@ -200,12 +208,27 @@ def run_eval(args) -> int:
     return 0
 
 
+def run_live(args) -> int:
+    """``companion run``: logs to stdout, one line per state change plus health lines."""
+    import logging
+
+    from companion.service import run_service
+
+    config = load_config(args.run_config)
+    logging.basicConfig(level=logging.INFO, stream=sys.stdout,
+                        format="%(asctime)s %(name)s: %(message)s")
+    logging.getLogger("mavsdk").setLevel(logging.WARNING)
+    return run_service(config, args.source)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = _parser()
     args = ap.parse_args(argv)
     try:
         if args.command == "eval":
             return run_eval(args)
+        if args.command == "run":
+            return run_live(args)
         if args.video is None:
             ap.print_usage(sys.stderr)
             raise UserError("nothing to do: give --video FILE --dry-run, or a command (eval)")

@@ -45,6 +45,11 @@ def _range(lo: float | None = None, hi: float | None = None, **kw: Any) -> dict[
 @dataclass(frozen=True)
 class CameraConfig:
     focal_px: float | None = field(default=None, metadata=_range(1.0, 100000.0))
+    device: str = "/dev/video0"
+    width: int = field(default=640, metadata=_range(16, 8192))
+    height: int = field(default=480, metadata=_range(16, 8192))
+    fps: float = field(default=30.0, metadata=_range(1.0, 240.0))
+    fourcc: str = "MJPG"
 
 
 @dataclass(frozen=True)
@@ -89,6 +94,15 @@ class OffboardConfig:
 
 
 @dataclass(frozen=True)
+class ServiceConfig:
+    decision_log: str | None = None
+    decision_log_max_mb: float = field(default=20.0, metadata=_range(0.01, 10000.0))
+    decision_log_backups: int = field(default=5, metadata=_range(0, 1000))
+    health_every_s: float = field(default=10.0, metadata=_range(0.5, 3600.0))
+    max_frame_gap_s: float = field(default=2.0, metadata=_range(0.1, 60.0))
+
+
+@dataclass(frozen=True)
 class Config:
     camera: CameraConfig = field(default_factory=CameraConfig)
     vision: VisionConfig = field(default_factory=VisionConfig)
@@ -96,6 +110,7 @@ class Config:
     policy: PolicyConfig = field(default_factory=PolicyConfig)
     mavlink: MavlinkConfig = field(default_factory=MavlinkConfig)
     offboard: OffboardConfig = field(default_factory=OffboardConfig)
+    service: ServiceConfig = field(default_factory=ServiceConfig)
 
 
 def load_config(path: str | Path | None) -> Config:

@@ -68,6 +68,7 @@ class OffboardController:
         self._enable_requested = False
         self.state = sv.initial_state(config.offboard)
         self.events: list[str] = []  # every state-change message, in order (also logged)
+        self.connected = False  # the autopilot's link, as MAVSDK sees it
 
     # ------------------------------------------------------------------ any thread
     def submit(self, command: TurnCommand, eta_deg: float | None = None,
@@ -231,6 +232,7 @@ class _Session:
             vehicle = sv.VehicleStatus(
                 connected=await self.system.is_connected(), armed=self.seen.armed,
                 in_air=self.seen.in_air, offboard=self.seen.offboard)
+            ctl.connected = vehicle.connected
             step = sv.supervise(ctl.state, vehicle, decision, now, cfg.offboard, cfg.policy)
             ctl.state = step.state
             for text in step.events:
