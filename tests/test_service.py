@@ -230,3 +230,33 @@ def test_companion_run_flies_the_mock_by_the_video_and_stops_on_sigterm(tmp_path
     assert any(line.startswith("STATUS=") and "fps" in line for line in lines)
     assert len(output.splitlines()) < len(records)  # no line per frame on stdout
     assert "Traceback" not in output
+
+
+def test_run_refuses_a_bad_config_key_in_one_line(tmp_path):
+    config = tmp_path / "bad.yaml"
+    config.write_text("offboard:\n  enabeld: true\n")
+    result = subprocess.run([sys.executable, "-m", "companion.cli", "run", "--config",
+                             str(config)], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert result.returncode == 2
+    assert result.stderr.strip() == f"companion: error: {config}: unknown key 'offboard.enabeld'"
+
+
+def test_decision_log_rotates_by_size(tmp_path):
+    from dataclasses import replace
+
+    from companion.service import _decision_log
+
+    path = tmp_path / "logs" / "decisions.jsonl"
+    cfg = Config()
+    cfg = replace(cfg, service=replace(cfg.service, decision_log=str(path),
+                                       decision_log_max_mb=0.001, decision_log_backups=2))
+    logger = _decision_log(cfg)
+    for i in range(100):
+        logger.info(json.dumps({"frame": i, "pad": "x" * 40}))
+    for handler in logger.handlers:
+        handler.close()
+    files = sorted(p.name for p in path.parent.iterdir())
+    assert files == ["decisions.jsonl", "decisions.jsonl.1", "decisions.jsonl.2"]
+    assert all(p.stat().st_size <= 1000 + 100 for p in path.parent.iterdir())
+    last = [json.loads(line) for line in path.read_text().splitlines()]
+    assert last[-1]["frame"] == 99

@@ -107,6 +107,8 @@ class OffboardController:
                     f"no autopilot answered on {cfg.mavlink.url} within "
                     f"{cfg.mavlink.connect_timeout_s:g} s (is it powered and is the URL right?)")
             self._event("autopilot connected")
+            if not cfg.offboard.enabled:
+                self._event("offboard.enabled is false: deciding only, never commanding")
             session = _Session(self, system)
             try:
                 await session.watch()
