@@ -25,7 +25,7 @@ os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 import cv2  # noqa: E402
 
 __all__ = ["Camera", "CaptureError", "Frame", "ImageFolder", "LatestFrame", "VideoFile",
-           "is_camera", "open_source"]
+           "is_camera", "open_recording", "open_source"]
 
 log = logging.getLogger("companion.capture")
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".ppm", ".pgm"}
@@ -115,6 +115,8 @@ class ImageFolder:
                 log.warning("skipping %s: not an image", f.name)
         if not self._files:
             raise CaptureError(f"no images in folder {p}")
+        first = cv2.imread(str(self._files[0]), cv2.IMREAD_COLOR)
+        self.height, self.width = first.shape[:2] if first is not None else (0, 0)
 
     def __len__(self) -> int:
         return len(self._files)
@@ -174,6 +176,11 @@ class Camera:
         self._cap.release()
 
 
+def open_recording(path: str | Path) -> VideoFile | ImageFolder:
+    """A video file, or a folder of images."""
+    return ImageFolder(path) if Path(path).is_dir() else VideoFile(path)
+
+
 def is_camera(spec: str | int) -> bool:
     """A camera index (``0``) or device path (``/dev/video0``), not a recording."""
     text = str(spec)
@@ -185,9 +192,7 @@ def open_source(spec: str | int, camera_size=(640, 480), camera_fps=30.0, fourcc
     text = str(spec)
     if is_camera(text):
         return Camera(text, *camera_size, camera_fps, fourcc)
-    if Path(text).is_dir():
-        return ImageFolder(text)
-    return VideoFile(text)
+    return open_recording(text)
 
 
 class LatestFrame:

@@ -19,7 +19,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from companion.capture import CaptureError, VideoFile
+from companion.capture import CaptureError, ImageFolder, open_recording
 from companion.config import Config, ConfigError, load_config
 
 EXIT_USAGE = 2
@@ -35,7 +35,7 @@ def _parser() -> argparse.ArgumentParser:
         prog="companion",
         description="Monocular non-Manhattan obstacle avoidance (Wang & Wei 2020).",
     )
-    ap.add_argument("--video", metavar="FILE", help="video file to process")
+    ap.add_argument("--video", metavar="FILE", help="video file, or folder of images, to process")
     ap.add_argument("--dry-run", action="store_true", help="no autopilot: decide, do not fly")
     ap.add_argument("--config", metavar="PATH", help="YAML config (default: built-in defaults)")
     ap.add_argument("--log", metavar="PATH", help="write one JSON line per frame")
@@ -118,7 +118,8 @@ def dry_run(args) -> int:
 
     cfg = _config(args.config, args.focal_px)
     pipeline = Pipeline(cfg)
-    video = VideoFile(args.video)
+    video = open_recording(args.video)
+    folder = isinstance(video, ImageFolder)
     log_file = _open_output(args.log, "log") if args.log else None
     log = DecisionLog(log_file) if log_file else None
     writer = None
@@ -126,16 +127,21 @@ def dry_run(args) -> int:
         Path(args.annotate).parent.mkdir(parents=True, exist_ok=True)
         writer = cv2.VideoWriter(
             args.annotate, cv2.VideoWriter_fourcc(*"mp4v"), video.fps, (video.width, video.height)
-        )
+        )  # images of another size than the first are resized to it
         if not writer.isOpened():
             video.close()
             raise UserError(f"cannot write annotated video {args.annotate}")
     focal = pipeline.focal_for(video.width)
     source = "given" if cfg.camera.focal_px else "assumed: half the frame width, 90° field of view"
-    print(
-        f"{video.path}: {video.width}×{video.height}, {len(video) or 'unknown'} frames at "
-        f"{video.fps:.1f} fps; focal {focal:.0f} px ({source})"
-    )
+    if folder:
+        print(f"{video.path}: {len(video)} images; focal "
+              + (f"{focal:.0f} px (given)" if cfg.camera.focal_px
+                 else "half of each image's width (assumed: 90° field of view)"))
+    else:
+        print(
+            f"{video.path}: {video.width}×{video.height}, {len(video) or 'unknown'} frames at "
+            f"{video.fps:.1f} fps; focal {focal:.0f} px ({source})"
+        )
     summary = Summary()
     progress = _Progress(not args.no_progress)
     interrupted = False
@@ -148,9 +154,12 @@ def dry_run(args) -> int:
             latency_ms = (time.perf_counter() - t0) * 1e3
             summary.add(est, latency_ms)
             if log:
-                log.write(log_record(frame.index, frame.t_s, est, cmd, latency_ms))
+                log.write(log_record(frame.index, frame.t_s, est, cmd, latency_ms, frame.source))
             if writer is not None:
-                writer.write(annotate(frame.image, est, cmd))
+                out = annotate(frame.image, est, cmd)
+                if out.shape[:2] != (video.height, video.width):
+                    out = cv2.resize(out, (video.width, video.height))
+                writer.write(out)
             eta = "η —" if est.eta_deg is None else f"η {est.eta_deg:+.1f}°"
             progress.update(frame.index + 1, len(video), f"{eta} {cmd.action}")
     except KeyboardInterrupt:

@@ -29,6 +29,9 @@ LOG_KEYS = (
     "action",
     "yaw_rate_deg_s",
     "latency_ms",
+    "source",
+    "layout_vps",
+    "focal_px",
 )
 
 # BGR colours: V1 red, V2 green, V3 blue, obstacle legs yellow, unassigned grey.
@@ -40,7 +43,29 @@ def _round(x: float | None, nd: int = 3) -> float | None:
     return None if x is None else round(float(x), nd)
 
 
-def log_record(frame: int, t: float, est: Estimate, cmd: TurnCommand, latency_ms: float) -> dict:
+def layout_vps_record(est: Estimate) -> list[list[float] | None]:
+    """V1, V2, V3 as ``[x, y, w]`` pixels (``w = 1``; ``w = 0`` at infinity), null if absent.
+
+    A row is given when segments support it, or when the layout was found and the row
+    was inferred from the other two (V2 ⟂ V1, V3).
+    """
+    rows: list[list[float] | None] = []
+    layout = est.layout
+    for i in range(3):
+        if layout is None or not (layout.observed[i] or layout.found):
+            rows.append(None)
+            continue
+        x, y, w = (float(v) for v in layout.vps[i])
+        if abs(w) > 1e-9 and max(abs(x / w), abs(y / w)) < 1e9:
+            rows.append([round(x / w, 3), round(y / w, 3), 1.0])
+        else:
+            n = max(np.hypot(x, y), 1e-300)
+            rows.append([round(x / n, 6), round(y / n, 6), 0.0])
+    return rows
+
+
+def log_record(frame: int, t: float, est: Estimate, cmd: TurnCommand, latency_ms: float,
+               source: str | None = None) -> dict:
     """One JSON-lines record, keys exactly :data:`LOG_KEYS`."""
     return {
         "frame": int(frame),
@@ -51,6 +76,9 @@ def log_record(frame: int, t: float, est: Estimate, cmd: TurnCommand, latency_ms
         "action": cmd.action,
         "yaw_rate_deg_s": round(float(cmd.yaw_rate_deg_s), 3),
         "latency_ms": round(float(latency_ms), 3),
+        "source": source,
+        "layout_vps": layout_vps_record(est),
+        "focal_px": round(float(est.focal_px), 3),
     }
 
 

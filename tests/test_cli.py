@@ -107,8 +107,32 @@ def test_text_file_named_mp4(tmp_path):
     _assert_one_line_error(run("--video", p, "--dry-run"), "not a video OpenCV can decode")
 
 
-def test_directory(tmp_path):
-    _assert_one_line_error(run("--video", tmp_path, "--dry-run"), "is a directory")
+def test_empty_folder(tmp_path):
+    _assert_one_line_error(run("--video", tmp_path, "--dry-run"), "no images in folder")
+
+
+def test_image_folder_in_name_order_with_vps_and_focal(sample_video, tmp_path):
+    video, _ = sample_video
+    cap = cv2.VideoCapture(str(video))
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for name in ("frame_b.png", "frame_a.jpg", "frame_c.png"):
+        ok, image = cap.read()
+        assert ok
+        cv2.imwrite(str(folder / name), image)
+    cap.release()
+    (folder / "README.txt").write_text("not an image")
+    log = tmp_path / "folder.jsonl"
+    result = run("--video", folder, "--dry-run", "--log", log, "--focal-px", "381")
+    assert result.returncode == 0, result.stderr
+    assert "skipping README.txt: not an image" in result.stderr
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    assert [r["source"] for r in records] == ["frame_a.jpg", "frame_b.png", "frame_c.png"]
+    for r in records:
+        assert r["focal_px"] == 381.0
+        v1, v2, v3 = r["layout_vps"]
+        assert v3 is not None and len(v3) == 3 and v3[2] in (0.0, 1.0)
+        assert v1 is not None  # the sample's room shows its layout
 
 
 def test_unreadable_and_bad_configs(sample_video, tmp_path):
