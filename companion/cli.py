@@ -62,6 +62,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     ev.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
+    ev.add_argument("--yud", metavar="DIR",
+                    help="instead: layout-VP accuracy on the York Urban Database in DIR")
+    ev.add_argument("--split", choices=("train", "test", "all"), default="test",
+                    help="YUD split (default test; tune on train only)")
     return ap
 
 
@@ -131,16 +135,17 @@ def dry_run(args) -> int:
         if not writer.isOpened():
             video.close()
             raise UserError(f"cannot write annotated video {args.annotate}")
-    focal = pipeline.focal_for(video.width)
-    source = "given" if cfg.camera.focal_px else "assumed: half the frame width, 90° field of view"
+    if cfg.camera.focal_px:
+        focal = f"focal {cfg.camera.focal_px:g} px (given)"
+    else:
+        focal = ("focal estimated per frame from the layout VPs, else half the width "
+                 "(90° field of view); D of eq. 10 = half the width")
     if folder:
-        print(f"{video.path}: {len(video)} images; focal "
-              + (f"{focal:.0f} px (given)" if cfg.camera.focal_px
-                 else "half of each image's width (assumed: 90° field of view)"))
+        print(f"{video.path}: {len(video)} images; {focal}")
     else:
         print(
             f"{video.path}: {video.width}×{video.height}, {len(video) or 'unknown'} frames at "
-            f"{video.fps:.1f} fps; focal {focal:.0f} px ({source})"
+            f"{video.fps:.1f} fps; {focal}"
         )
     summary = Summary()
     progress = _Progress(not args.no_progress)
@@ -189,6 +194,8 @@ def run_eval(args) -> int:
     from sitl.evaluate import format_report
     from sitl.evaluate import run_eval as evaluate
 
+    if args.yud:
+        return run_eval_yud(args)
     if args.scenes < 1:
         raise UserError("--scenes must be at least 1")
     cfg = _config(args.eval_config, None)
@@ -214,6 +221,28 @@ def run_eval(args) -> int:
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(report.figures(), f, indent=2)
+    return 0
+
+
+def run_eval_yud(args) -> int:
+    """``companion eval --yud DIR``: layout VPs on real photographs, focal given and not."""
+    from sitl.yud import evaluate_yud, format_yud
+
+    folder = Path(args.yud)
+    if not (folder / "yud.json").is_file():
+        raise UserError(f"{folder}: no yud.json here (expected the converted York Urban DB)")
+    cfg = _config(args.eval_config, None)
+    start = time.perf_counter()
+    reports = [evaluate_yud(folder, args.split, given, cfg) for given in (True, False)]
+    print(f"York Urban DB, {args.split} split: layout VPs (V1, V2, V3) against the "
+          "hand-labelled Manhattan VPs")
+    for line in format_yud(reports):
+        print(line)
+    print(f"({time.perf_counter() - start:.0f} s; companion eval --yud {args.yud} "
+          f"--split {args.split})")
+    if args.json:
+        with _open_output(args.json, "figures") as f:
+            json.dump([r.figures() for r in reports], f, indent=2)
     return 0
 
 

@@ -104,10 +104,13 @@ class Summary:
 
     def __post_init__(self):
         self.latencies: list[float] = []
+        self.focal_estimates: list[float] = []
 
     def add(self, est: Estimate, latency_ms: float) -> None:
         self.frames += 1
         self.latencies.append(latency_ms)
+        if est.focal_source == "estimated":
+            self.focal_estimates.append(est.focal_px)
         if est.eta_deg is not None:
             self.with_obstacle += 1
             self.eta_min = est.eta_deg if self.eta_min is None else min(self.eta_min, est.eta_deg)
@@ -117,11 +120,15 @@ class Summary:
         lat = np.array(self.latencies) if self.latencies else np.zeros(1)
         eta = f"{self.eta_min:+.1f}° … {self.eta_max:+.1f}°" if self.eta_min is not None else "none"
         fps = self.frames / wall_s if wall_s > 0 else 0.0
-        return [
+        out = [
             f"frames: {self.frames}   with obstacle: {self.with_obstacle}   η range: {eta}",
             f"latency: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms"
             f"   throughput: {fps:.1f} fps",
         ]
+        if self.focal_estimates:
+            out.append(f"focal length estimated from V1 ⟂ V2 on {len(self.focal_estimates)} of "
+                       f"{self.frames} frames: median {np.median(self.focal_estimates):.0f} px")
+        return out
 
 
 def _clip_point(p: np.ndarray, w: int, h: int) -> tuple[int, int]:

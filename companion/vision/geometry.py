@@ -9,6 +9,8 @@ All functions are pure and vectorised over a leading axis where that is natural.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -167,3 +169,18 @@ def angle_between_directions_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Angle between undirected 3-D directions, in degrees within [0, 90]."""
     c = np.abs(np.sum(np.asarray(a) * np.asarray(b), axis=-1))
     return np.degrees(np.arccos(np.clip(c, 0.0, 1.0)))
+
+
+def focal_from_orthogonal_vps(vp_a: np.ndarray, vp_b: np.ndarray,
+                              centre: np.ndarray) -> float | None:
+    """Focal length (pixels) that makes two finite VPs orthogonal directions.
+
+    With square pixels and principal point ``centre``, orthogonal directions satisfy
+    ``(a - c)·(b - c) + f² = 0``, so ``f = sqrt(-(a - c)·(b - c))``. ``None`` when either
+    VP is at infinity or the VPs lie on the same side of the centre (no real solution).
+    """
+    a, b = np.asarray(vp_a, dtype=float), np.asarray(vp_b, dtype=float)
+    if abs(a[2]) < 1e-12 or abs(b[2]) < 1e-12:
+        return None
+    q = -float((a[:2] / a[2] - centre) @ (b[:2] / b[2] - centre))
+    return math.sqrt(q) if q > 0 else None

@@ -16,7 +16,7 @@ import numpy as np
 
 from companion.config import Config
 from companion.vision.corners import Corners, find_corners, table1_mask
-from companion.vision.geometry import principal_point
+from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
@@ -37,7 +37,9 @@ class Estimate:
     ``segments`` N×4 and ``labels`` N (V1 0, V2 1, V3 2, none −1); ``corners``: the
     top-K corner projections; ``obstacle_corners``: those passing Table I.
     ``stage_ms``: wall time per stage in milliseconds (keys :data:`STAGES`).
-    ``focal_px``: the focal length assumed; ``depth_px``: D of eq. 10.
+    ``focal_px``: the focal length the layout rests on, ``focal_source`` where it came from
+    (given, estimated, assumed); ``depth_px``: D of eq. 10 (configured, else the given
+    focal length, else half the width: the paper's Table IV).
     """
 
     eta_deg: float | None
@@ -53,6 +55,7 @@ class Estimate:
     height: int
     focal_px: float
     depth_px: float
+    focal_source: str = "given"  # given | estimated (from V1 ⟂ V2) | assumed (width / 2)
     stage_ms: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -83,6 +86,29 @@ class Pipeline:
         """Focal length in pixels: configured, else half the width (90° field of view)."""
         return self.config.camera.focal_px or width / 2.0
 
+    def _layout(self, segments: np.ndarray, w: int, h: int) -> tuple[LayoutVPs, str]:
+        """Layout VPs, and where the focal length they rest on came from.
+
+        ``given``: configured. Otherwise self-calibration: V1 and V2 found with the
+        assumed focal length (half the width, then the width) are orthogonal in space, so
+        when both are finite they fix ``f`` (:func:`focal_from_orthogonal_vps`); the VPs
+        are then found again with it (``estimated``). Else ``assumed``.
+        """
+        vp = self.config.vision.vanishing
+        if self.config.camera.focal_px:
+            return detect_layout_vps(segments, w, h, self.config.camera.focal_px, vp), "given"
+        centre = principal_point(w, h)
+        first = None
+        for guess in (w / 2.0, float(w)):
+            layout = detect_layout_vps(segments, w, h, guess, vp)
+            first = first or layout
+            if not (layout.observed[V1] and layout.observed[V2]):
+                continue
+            f = focal_from_orthogonal_vps(layout.vps[V1], layout.vps[V2], centre)
+            if f is not None and 0.3 * w <= f <= 3.0 * w:
+                return detect_layout_vps(segments, w, h, f, vp), "estimated"
+        return first, "assumed"
+
     def __call__(self, frame: np.ndarray) -> Estimate:
         """Run every stage on a BGR or grey ``frame`` (H×W[×3] uint8)."""
         vc = self.config.vision
@@ -99,7 +125,7 @@ class Pipeline:
         t1 = time.perf_counter()
         ms["lines"] = (t1 - t0) * 1e3
 
-        layout = detect_layout_vps(segments, w, h, focal, vc.vanishing)
+        layout, focal_source = self._layout(segments, w, h)
         labels, _ = assign_segments(segments, layout.vps, vc.vanishing)
         t2 = time.perf_counter()
         ms["vps"] = (t2 - t1) * 1e3
@@ -152,7 +178,8 @@ class Pipeline:
             obstacle_corners=obstacle_corners,
             width=w,
             height=h,
-            focal_px=focal,
+            focal_px=layout.focal_px,
+            focal_source=focal_source,
             depth_px=depth,
             stage_ms=ms,
         )

@@ -1,0 +1,144 @@
+"""Layout-VP accuracy on the York Urban Database (real photographs, hand-labelled VPs).
+
+Behind ``companion eval --yud DIR``. The data stays where it is (``../shared/data/yud``);
+nothing of it is copied into the repository. Metric, as the database's README defines it:
+for each ground-truth VP, the angle between its 3-D direction and the nearest estimated
+VP's direction (``K⁻¹ v``, normalised); AA@θ is the area under the cumulative error curve
+from 0 to θ, divided by θ, in percent. The segment→VP assignment is scored on the
+ground-truth segments: precision over the segments it assigns, recall over all of them.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from companion.config import Config
+from companion.vision.pipeline import Pipeline
+from companion.vision.vanishing import NONE, assign_segments
+
+__all__ = ["YudReport", "angular_errors_deg", "area_under_curve", "evaluate_yud"]
+
+THRESHOLDS_DEG = (3.0, 5.0, 10.0)
+
+
+def area_under_curve(errors_deg: np.ndarray, threshold_deg: float) -> float:
+    """AA@θ in percent: the mean over [0, θ] of the share of errors at most that large."""
+    e = np.sort(np.asarray(errors_deg, dtype=float))
+    if len(e) == 0:
+        return 0.0
+    # ∫0^θ F(t) dt / θ with F the empirical CDF: each error e_i < θ adds (θ - e_i) / n.
+    return float(100.0 * np.clip(threshold_deg - e, 0.0, None).sum() / (len(e) * threshold_deg))
+
+
+def angular_errors_deg(truth_dirs: np.ndarray, est_dirs: np.ndarray) -> np.ndarray:
+    """For each true 3-D direction, the angle (deg) to the nearest estimated one (sign-free).
+
+    90° for every truth when nothing was estimated.
+    """
+    t = np.asarray(truth_dirs, dtype=float)
+    t = t / np.linalg.norm(t, axis=1, keepdims=True)
+    if len(est_dirs) == 0:
+        return np.full(len(t), 90.0)
+    e = np.asarray(est_dirs, dtype=float)
+    e = e / np.linalg.norm(e, axis=1, keepdims=True)
+    cos = np.clip(np.abs(t @ e.T), 0.0, 1.0)
+    return np.degrees(np.arccos(cos.max(axis=1)))
+
+
+@dataclass(frozen=True)
+class YudReport:
+    split: str
+    images: int
+    focal_given: bool
+    errors_deg: np.ndarray
+    ms_per_image: float
+    focal_estimates_px: np.ndarray  # per image where the focal length was estimated
+    true_focal_px: float
+    assign_precision: float
+    assign_recall: float
+
+    def figures(self) -> dict[str, float | int | bool | str | None]:
+        out: dict[str, float | int | bool | str | None] = {
+            "split": self.split, "images": self.images, "focal_given": self.focal_given}
+        for th in THRESHOLDS_DEG:
+            out[f"aa{th:g}"] = round(area_under_curve(self.errors_deg, th), 2)
+        out["median_err_deg"] = round(float(np.median(self.errors_deg)), 3)
+        out["ms_per_image"] = round(self.ms_per_image, 1)
+        f = self.focal_estimates_px
+        out["focal_estimated_on"] = int(len(f))
+        out["focal_median_px"] = round(float(np.median(f)), 1) if len(f) else None
+        out["assign_precision"] = round(self.assign_precision, 3)
+        out["assign_recall"] = round(self.assign_recall, 3)
+        return out
+
+
+def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = True,
+                 config: Config | None = None, limit: int | None = None) -> YudReport:
+    """Run the layout-VP stage on every image of ``split`` ("train", "test" or "all"),
+    or on its first ``limit`` images."""
+    root = Path(folder)
+    data = json.loads((root / "yud.json").read_text())
+    f_true = float(data["focal_px"])
+    pp = np.asarray(data["principal_point"], dtype=float)
+    k_inv = np.linalg.inv(np.array([[f_true, 0, pp[0]], [0, f_true, pp[1]], [0, 0, 1.0]]))
+    cfg = config or Config()
+    cfg = replace(cfg, camera=replace(cfg.camera, focal_px=f_true if focal_given else None))
+    pipeline = Pipeline(cfg)
+    errors, ms, focals = [], [], []
+    right = assigned = total = 0
+    images = [im for im in data["images"] if split == "all" or im["split"] == split][:limit]
+    for im in images:
+        image = cv2.imread(str(root / im["file"]), cv2.IMREAD_COLOR)
+        if image is None:
+            raise FileNotFoundError(f"cannot read {root / im['file']}")
+        t0 = time.perf_counter()
+        est = pipeline(image)
+        ms.append((time.perf_counter() - t0) * 1e3)
+        layout = est.layout
+        rows = [i for i in range(3) if layout.observed[i] or layout.found]
+        # Directions through the true intrinsics, as the metric defines.
+        est_dirs = [k_inv @ layout.vps[i] for i in rows]
+        truth = np.asarray(im["vps_dir"], dtype=float)
+        errors.extend(angular_errors_deg(truth, est_dirs))
+        if est.focal_source == "estimated":
+            focals.append(est.focal_px)
+        # Segment assignment: estimated VP i ↔ the true VP nearest to it.
+        segs = np.asarray(im["segments"], dtype=float).reshape(-1, 4)
+        labels, _ = assign_segments(segs, layout.vps, cfg.vision.vanishing)
+        truth_of_est = {
+            i: int(np.argmax(np.abs((truth / np.linalg.norm(truth, axis=1, keepdims=True))
+                                    @ (d / np.linalg.norm(d)))))
+            for i, d in zip(rows, est_dirs, strict=True)}
+        gt = np.asarray(im["segment_vp"], dtype=int)
+        for lab, g in zip(labels, gt, strict=True):
+            total += 1
+            if lab != NONE and lab in truth_of_est:
+                assigned += 1
+                right += truth_of_est[lab] == g
+    return YudReport(
+        split=split, images=len(images), focal_given=focal_given,
+        errors_deg=np.asarray(errors), ms_per_image=float(np.median(ms)) if ms else 0.0,
+        focal_estimates_px=np.asarray(focals), true_focal_px=f_true,
+        assign_precision=right / assigned if assigned else 0.0,
+        assign_recall=right / total if total else 0.0)
+
+
+def format_yud(reports: list[YudReport]) -> list[str]:
+    lines = [f"{'focal':<10}{'images':>7}{'AA@3°':>8}{'AA@5°':>8}{'AA@10°':>8}"
+             f"{'median':>9}{'ms/img':>8}{'assign P/R':>13}  focal estimate"]
+    for r in reports:
+        f = r.figures()
+        est = (f"median {f['focal_median_px']} px on {f['focal_estimated_on']} images "
+               f"(true {r.true_focal_px:.1f})" if f["focal_median_px"] else "—")
+        lines.append(
+            f"{'given' if r.focal_given else 'estimated':<10}{f['images']:>7}{f['aa3']:>8.1f}"
+            f"{f['aa5']:>8.1f}{f['aa10']:>8.1f}{f['median_err_deg']:>8.2f}°"
+            f"{f['ms_per_image']:>8.1f}{f['assign_precision']:>7.2f}/{f['assign_recall']:.2f}"
+            f"  {est if not r.focal_given else '—'}")
+    return lines
