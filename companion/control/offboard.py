@@ -244,9 +244,9 @@ class _Session:
                     VelocityBodyYawspeed(0.0, 0.0, 0.0, step.yaw_rate_deg_s)))
             self.streaming = step.stream
             if step.request == "start":
-                await self._call(self.offboard.start(), timeout_s=1.5)
+                await self._command(self.offboard._plugin.start, timeout_s=1.5)
             elif step.request == "stop":
-                await self._call(self.offboard.stop(), timeout_s=1.5)
+                await self._command(self.offboard._plugin.stop, timeout_s=1.5)
             elif step.request == "release":
                 await self._release()
             if (report_every_s and vehicle.connected and now >= next_report_s
@@ -292,7 +292,7 @@ class _Session:
         if engaged:
             self.ctl.state = sv.SupervisorState("disabled", False)
             await self._announce("companion stopping: yaw rate 0, Hold")
-            await self._call(self.offboard.stop(), timeout_s=STOP_BUDGET_S)
+            await self._command(self.offboard._plugin.stop, timeout_s=STOP_BUDGET_S)
         for task in self.tasks:
             task.cancel()
         await asyncio.gather(*self.tasks, return_exceptions=True)
@@ -310,6 +310,32 @@ class _Session:
         msg = MavlinkMessage(name, COMPANION_SYSTEM_ID, COMPANION_COMPONENT_ID, 0, 0,
                              json.dumps(fields, allow_nan=True))
         await self._call(self.direct.send_message(msg), timeout_s=0.2)
+
+    async def _command(self, blocking_call, timeout_s: float) -> None:
+        """A MAVSDK call that waits for a COMMAND_ACK (offboard start/stop), bounded.
+
+        It runs on a daemon thread of its own rather than the loop's executor: with the
+        link gone MAVSDK can block in it past our timeout, and an executor thread would
+        then hold up the process's exit, breaking the 1 s SIGTERM promise.
+        """
+        from mavsdk.asyncio import MavsdkError
+
+        done = threading.Event()
+
+        def run() -> None:
+            try:
+                blocking_call()
+            except MavsdkError as exc:
+                log.info("MAVSDK command failed: %s", exc)
+            finally:
+                done.set()
+
+        threading.Thread(target=run, name="mavsdk-command", daemon=True).start()
+        deadline = time.monotonic() + timeout_s
+        while not done.is_set() and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
+        if not done.is_set():
+            log.info("MAVSDK command still unanswered after %.1f s; moving on", timeout_s)
 
     async def _call(self, coro, timeout_s: float = 0.5):
         """Await a MAVSDK call; a failure is logged, never fatal to the loop."""
