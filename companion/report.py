@@ -50,12 +50,11 @@ def layout_vps_record(est: Estimate) -> list[list[float] | None]:
     was inferred from the other two (V2 ⟂ V1, V3).
     """
     rows: list[list[float] | None] = []
-    layout = est.layout
     for i in range(3):
-        if layout is None or not (layout.observed[i] or layout.found):
+        if i not in est.layout.usable_rows:
             rows.append(None)
             continue
-        x, y, w = (float(v) for v in layout.vps[i])
+        x, y, w = (float(v) for v in est.layout.vps[i])
         if abs(w) > 1e-9 and max(abs(x / w), abs(y / w)) < 1e9:
             rows.append([round(x / w, 3), round(y / w, 3), 1.0])
         else:

@@ -101,7 +101,7 @@ def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = Tr
         est = pipeline(image)
         ms.append((time.perf_counter() - t0) * 1e3)
         layout = est.layout
-        rows = [i for i in range(3) if layout.observed[i] or layout.found]
+        rows = layout.usable_rows
         # Directions through the true intrinsics, as the metric defines.
         est_dirs = [k_inv @ layout.vps[i] for i in rows]
         truth = np.asarray(im["vps_dir"], dtype=float)

@@ -82,12 +82,14 @@ def _collinearity_px(seg_a: np.ndarray, seg_b: np.ndarray) -> float:
     return float(max(np.abs(pb @ la).max(), np.abs(pa @ lb).max()))
 
 
+def _horizon_error_deg(d, d3) -> float:
+    """How far an OVP direction is from horizontal (⟂ the vertical V3), degrees."""
+    return float(abs(90.0 - angle_between_directions_deg(d, d3)))
+
+
 def _ovp_error_deg(d1, d2, d3) -> tuple[float, float]:
     """λ3 (eq. 8) parts: how far O1, O2 are from horizontal, and from orthogonal."""
-    horizon = max(
-        abs(90.0 - angle_between_directions_deg(d1, d3)),
-        abs(90.0 - angle_between_directions_deg(d2, d3)),
-    )
+    horizon = max(_horizon_error_deg(d1, d3), _horizon_error_deg(d2, d3))
     ortho = abs(90.0 - angle_between_directions_deg(d1, d2))
     return float(horizon), float(ortho)
 
@@ -137,9 +139,9 @@ def _partner_legs(cand, lines, ends, vline, pc, e, edge, reach_px, radius_px) ->
     return cand[ok]
 
 
-def _off_layout(d1, d2, layout_dirs, p: ObstacleParams) -> bool:
-    """Both OVP directions at least ``non_manhattan_min_deg`` from V1 and V2."""
-    sep = angle_between_directions_deg(np.vstack([d1, d2])[:, None, :], layout_dirs[None])
+def _off_layout(dirs, layout_dirs, p: ObstacleParams) -> bool:
+    """Every OVP direction in ``dirs`` at least ``non_manhattan_min_deg`` from V1 and V2."""
+    sep = angle_between_directions_deg(np.vstack(dirs)[:, None, :], layout_dirs[None])
     return bool(sep.min() >= p.non_manhattan_min_deg)
 
 
@@ -217,7 +219,7 @@ def find_obstacles(
                     hor, ortho = _ovp_error_deg(d1, d2, d3)
                     if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg:
                         continue
-                    if not _off_layout(d1, d2, layout_dirs, p):
+                    if not _off_layout((d1, d2), layout_dirs, p):
                         continue
                     lam3 = max(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
                     # Two real partner legs beat one; then the smaller λ3.
@@ -232,9 +234,8 @@ def find_obstacles(
             if np.any(o1) and np.any(o2):
                 d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
                 _, ortho = _ovp_error_deg(d1, d2, d3)
-                if ortho <= p.single_corner_orthogonal_tol_deg and _off_layout(
-                    d1, d2, layout_dirs, p
-                ):
+                if (ortho <= p.single_corner_orthogonal_tol_deg
+                        and _off_layout((d1, d2), layout_dirs, p)):
                     best = ((True, ortho), d1, d2, ortho)
         if best is None:
             continue
@@ -425,9 +426,8 @@ def _silhouette_halves(edges, lines, d3, layout_dirs, f, c, p: ObstacleParams):
                 if not np.any(o):
                     continue
                 d = direction_of(o, f, c)
-                horizon = abs(90.0 - angle_between_directions_deg(d, d3))
-                sep = angle_between_directions_deg(d[None], layout_dirs).min()
-                if horizon <= p.horizon_tol_deg and sep >= p.non_manhattan_min_deg:
+                if _horizon_error_deg(d, d3) <= p.horizon_tol_deg and _off_layout(
+                        [d], layout_dirs, p):
                     halves.append((d, length, (ka, kb), np.vstack([end_a, end_b])))
     return halves
 
@@ -455,8 +455,9 @@ def _edge_horizon_pairs(edges, lines, horizon, d3, layout_dirs, f, c, p: Obstacl
                     continue
                 da, db = direction_of(o, f, c)
                 _, ortho = _ovp_error_deg(da, db, d3)
-                if ortho <= p.single_corner_orthogonal_tol_deg and _off_layout(
-                        da, db, layout_dirs, p) and (best is None or ortho < best[0]):
+                if (ortho <= p.single_corner_orthogonal_tol_deg
+                        and _off_layout((da, db), layout_dirs, p)
+                        and (best is None or ortho < best[0])):
                     best = (ortho, da, db, ka, kb)
         if best is not None:
             ortho, da, db, ka, kb = best

@@ -91,6 +91,12 @@ class LayoutVPs:
         """True when both a vertical and a horizontal layout VP are backed by segments."""
         return self.observed[V3] and self.observed[V1]
 
+    @property
+    def usable_rows(self) -> tuple[int, ...]:
+        """Rows of ``vps`` worth reporting: backed by segments, or inferred (V2 ⟂ V1, V3)
+        within a found layout."""
+        return tuple(i for i in range(3) if self.observed[i] or self.found)
+
 
 def _to_normalised(segments: np.ndarray, centre: np.ndarray, focal: float) -> np.ndarray:
     s = np.asarray(segments, dtype=float).reshape(-1, 4).copy()
