@@ -7,8 +7,6 @@ at 1 Hz, as PX4's does.
 
 import asyncio
 import os
-import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -17,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from helpers.processes import free_udp_port, stop_with_sigterm
 
 from companion.config import Config, MavlinkConfig, OffboardConfig, PolicyConfig
 from companion.control.offboard import OffboardController
@@ -24,12 +23,6 @@ from companion.control.policy import TurnCommand
 from sitl.autopilot import HOLD, OFFBOARD, POSCTL, AutopilotParams, MockAutopilot
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def in_air_autopilot(port: int, **params) -> MockAutopilot:
@@ -297,13 +290,8 @@ def test_sigterm_stops_turning_releases_offboard_and_exits_within_a_second(port)
         try:
             wait_offboard(ap, 15.0)
             time.sleep(0.5)
-            t0 = time.monotonic()
-            proc.send_signal(signal.SIGTERM)
-            code = proc.wait(timeout=5)
-            took = time.monotonic() - t0
         finally:
-            if proc.poll() is None:
-                proc.kill()
+            code, took = stop_with_sigterm(proc)
         output = proc.stdout.read()
         assert ap.wait_for(lambda: ap.mode == HOLD, 0.5)
         last = ap.setpoints[-1]

@@ -6,7 +6,6 @@ import json
 import logging
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import sys
@@ -17,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from helpers.processes import free_udp_port, stop_with_sigterm
 
 from companion.capture import CaptureError, ImageFolder, LatestFrame, VideoFile, open_source
 from companion.config import Config
@@ -190,9 +190,7 @@ def test_the_unit_file_passes_systemd_analyze_verify(tmp_path):
 
 def test_companion_run_flies_the_mock_by_the_video_and_stops_on_sigterm(tmp_path,
                                                                          notify_socket):
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_udp_port()
     log = tmp_path / "decisions.jsonl"
     config = tmp_path / "companion.yaml"
     config.write_text(f"mavlink:\n  url: udpin://127.0.0.1:{port}\noffboard:\n  enabled: true\n"
@@ -207,13 +205,8 @@ def test_companion_run_flies_the_mock_by_the_video_and_stops_on_sigterm(tmp_path
         assert ap.wait_for(lambda: ap.mode == OFFBOARD, 15.0), "offboard never engaged"
         assert ap.wait_for(lambda: any(s.yaw_rate_deg_s != 0 for s in ap.setpoints), 3.0)
         time.sleep(0.5)
-        t0 = time.monotonic()
-        proc.send_signal(signal.SIGTERM)
-        code = proc.wait(timeout=5)
-        took = time.monotonic() - t0
     finally:
-        if proc.poll() is None:
-            proc.kill()
+        code, took = stop_with_sigterm(proc)
         ap.stop()
     output = proc.stdout.read()
     assert code == 0, output
