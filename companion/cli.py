@@ -66,6 +66,8 @@ def _parser() -> argparse.ArgumentParser:
                     help="instead: layout-VP accuracy on the York Urban Database in DIR")
     ev.add_argument("--split", choices=("train", "test", "all"), default="test",
                     help="YUD split (default test; tune on train only)")
+    ev.add_argument("--no-peer", action="store_true",
+                    help="with --yud: do not run the peer lu-vp-detect even if installed")
     return ap
 
 
@@ -225,19 +227,36 @@ def run_eval(args) -> int:
 
 
 def run_eval_yud(args) -> int:
-    """``companion eval --yud DIR``: layout VPs on real photographs, focal given and not."""
-    from sitl.yud import evaluate_yud, format_yud
+    """``companion eval --yud DIR``: layout VPs on real photographs, focal given and not,
+    beside the peer lu-vp-detect when it is installed."""
+    from sitl.peers import PeerUnavailable
+    from sitl.yud import evaluate_yud, evaluate_yud_lu, format_yud
 
     folder = Path(args.yud)
     if not (folder / "yud.json").is_file():
         raise UserError(f"{folder}: no yud.json here (expected the converted York Urban DB)")
     cfg = _config(args.eval_config, None)
     start = time.perf_counter()
-    reports = [evaluate_yud(folder, args.split, given, cfg) for given in (True, False)]
+    reports, peer_missing = [], None
+    for given in (True, False):
+        reports.append(evaluate_yud(folder, args.split, given, cfg))
+        if args.no_peer or peer_missing:
+            continue
+        try:
+            reports.append(evaluate_yud_lu(folder, args.split, given))
+        except PeerUnavailable as exc:
+            peer_missing = str(exc)
     print(f"York Urban DB, {args.split} split: layout VPs (V1, V2, V3) against the "
           "hand-labelled Manhattan VPs")
     for line in format_yud(reports):
         print(line)
+    ours = next(r for r in reports if r.focal_given and r.method == "companion")
+    peer = next((r for r in reports if r.focal_given and r.method != "companion"), None)
+    if peer is not None and ours.ms_per_image > 0:
+        print(f"speed, focal given: companion {peer.ms_per_image / ours.ms_per_image:.1f}× "
+              f"faster per image than {peer.method} (median ms, same images, same run)")
+    if peer_missing:
+        print(f"peer not run: {peer_missing}")
     print(f"({time.perf_counter() - start:.0f} s; companion eval --yud {args.yud} "
           f"--split {args.split})")
     if args.json:

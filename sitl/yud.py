@@ -22,7 +22,8 @@ from companion.config import Config
 from companion.vision.pipeline import Pipeline
 from companion.vision.vanishing import NONE, assign_segments
 
-__all__ = ["YudReport", "angular_errors_deg", "area_under_curve", "evaluate_yud"]
+__all__ = ["YudReport", "angular_errors_deg", "area_under_curve", "evaluate_yud",
+           "evaluate_yud_lu", "format_yud"]
 
 THRESHOLDS_DEG = (3.0, 5.0, 10.0)
 
@@ -60,12 +61,14 @@ class YudReport:
     ms_per_image: float
     focal_estimates_px: np.ndarray  # per image where the focal length was estimated
     true_focal_px: float
-    assign_precision: float
-    assign_recall: float
+    assign_precision: float | None  # None for a method whose assignment is not scored
+    assign_recall: float | None
+    method: str = "companion"
 
     def figures(self) -> dict[str, float | int | bool | str | None]:
         out: dict[str, float | int | bool | str | None] = {
-            "split": self.split, "images": self.images, "focal_given": self.focal_given}
+            "method": self.method, "split": self.split, "images": self.images,
+            "focal_given": self.focal_given}
         for th in THRESHOLDS_DEG:
             out[f"aa{th:g}"] = round(area_under_curve(self.errors_deg, th), 2)
         out["median_err_deg"] = round(float(np.median(self.errors_deg)), 3)
@@ -73,48 +76,71 @@ class YudReport:
         f = self.focal_estimates_px
         out["focal_estimated_on"] = int(len(f))
         out["focal_median_px"] = round(float(np.median(f)), 1) if len(f) else None
-        out["assign_precision"] = round(self.assign_precision, 3)
-        out["assign_recall"] = round(self.assign_recall, 3)
+        out["assign_precision"] = (None if self.assign_precision is None
+                                   else round(self.assign_precision, 3))
+        out["assign_recall"] = (None if self.assign_recall is None
+                                else round(self.assign_recall, 3))
         return out
+
+
+@dataclass(frozen=True)
+class _Yud:
+    root: Path
+    f_true: float
+    k_inv: np.ndarray  # inverse of the true intrinsics, for the metric
+    images: list[dict]
+
+    def read(self, im: dict) -> np.ndarray:
+        image = cv2.imread(str(self.root / im["file"]), cv2.IMREAD_COLOR)
+        if image is None:
+            raise FileNotFoundError(f"cannot read {self.root / im['file']}")
+        return image
+
+    def errors_deg(self, im: dict, vps: list[np.ndarray]) -> np.ndarray:
+        """Angular error of each of the image's true VPs, for homogeneous pixel VPs."""
+        return angular_errors_deg(np.asarray(im["vps_dir"], dtype=float),
+                                  [self.k_inv @ v for v in vps])
+
+
+def _load(folder: str | Path, split: str, limit: int | None) -> _Yud:
+    root = Path(folder)
+    data = json.loads((root / "yud.json").read_text())
+    f_true = float(data["focal_px"])
+    pp = np.asarray(data["principal_point"], dtype=float)
+    k_inv = np.linalg.inv(np.array([[f_true, 0, pp[0]], [0, f_true, pp[1]], [0, 0, 1.0]]))
+    images = [im for im in data["images"] if split == "all" or im["split"] == split][:limit]
+    return _Yud(root, f_true, k_inv, images)
 
 
 def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = True,
                  config: Config | None = None, limit: int | None = None) -> YudReport:
     """Run the layout-VP stage on every image of ``split`` ("train", "test" or "all"),
     or on its first ``limit`` images."""
-    root = Path(folder)
-    data = json.loads((root / "yud.json").read_text())
-    f_true = float(data["focal_px"])
-    pp = np.asarray(data["principal_point"], dtype=float)
-    k_inv = np.linalg.inv(np.array([[f_true, 0, pp[0]], [0, f_true, pp[1]], [0, 0, 1.0]]))
+    yud = _load(folder, split, limit)
     cfg = config or Config()
-    cfg = replace(cfg, camera=replace(cfg.camera, focal_px=f_true if focal_given else None))
+    cfg = replace(cfg, camera=replace(cfg.camera, focal_px=yud.f_true if focal_given else None))
     pipeline = Pipeline(cfg)
     errors, ms, focals = [], [], []
     right = assigned = total = 0
-    images = [im for im in data["images"] if split == "all" or im["split"] == split][:limit]
-    for im in images:
-        image = cv2.imread(str(root / im["file"]), cv2.IMREAD_COLOR)
-        if image is None:
-            raise FileNotFoundError(f"cannot read {root / im['file']}")
+    for im in yud.images:
+        image = yud.read(im)
         t0 = time.perf_counter()
         est = pipeline(image)
         ms.append((time.perf_counter() - t0) * 1e3)
         layout = est.layout
         rows = layout.usable_rows
-        # Directions through the true intrinsics, as the metric defines.
-        est_dirs = [k_inv @ layout.vps[i] for i in rows]
-        truth = np.asarray(im["vps_dir"], dtype=float)
-        errors.extend(angular_errors_deg(truth, est_dirs))
+        errors.extend(yud.errors_deg(im, [layout.vps[i] for i in rows]))
         if est.focal_source == "estimated":
             focals.append(est.focal_px)
         # Segment assignment: estimated VP i ↔ the true VP nearest to it.
+        truth = np.asarray(im["vps_dir"], dtype=float)
+        truth = truth / np.linalg.norm(truth, axis=1, keepdims=True)
+        truth_of_est = {}
+        for i in rows:
+            d = yud.k_inv @ layout.vps[i]
+            truth_of_est[i] = int(np.argmax(np.abs(truth @ (d / np.linalg.norm(d)))))
         segs = np.asarray(im["segments"], dtype=float).reshape(-1, 4)
         labels, _ = assign_segments(segs, layout.vps, cfg.vision.vanishing)
-        truth_of_est = {
-            i: int(np.argmax(np.abs((truth / np.linalg.norm(truth, axis=1, keepdims=True))
-                                    @ (d / np.linalg.norm(d)))))
-            for i, d in zip(rows, est_dirs, strict=True)}
         gt = np.asarray(im["segment_vp"], dtype=int)
         for lab, g in zip(labels, gt, strict=True):
             total += 1
@@ -122,23 +148,57 @@ def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = Tr
                 assigned += 1
                 right += truth_of_est[lab] == g
     return YudReport(
-        split=split, images=len(images), focal_given=focal_given,
+        split=split, images=len(yud.images), focal_given=focal_given,
         errors_deg=np.asarray(errors), ms_per_image=float(np.median(ms)) if ms else 0.0,
-        focal_estimates_px=np.asarray(focals), true_focal_px=f_true,
+        focal_estimates_px=np.asarray(focals), true_focal_px=yud.f_true,
         assign_precision=right / assigned if assigned else 0.0,
         assign_recall=right / total if total else 0.0)
 
 
+def evaluate_yud_lu(folder: str | Path, split: str = "test", focal_given: bool = True,
+                    limit: int | None = None) -> YudReport:
+    """The same measurement for the peer lu-vp-detect (see :mod:`sitl.peers`).
+
+    It gets the same camera as our pipeline: the true focal length or, without it, its own
+    default (it cannot calibrate itself); the principal point at the image centre.
+    Raises :class:`sitl.peers.PeerUnavailable` when the package is not installed.
+    """
+    from sitl.peers import LU_DEFAULT_FOCAL_PX, lu_vp_detector
+
+    yud = _load(folder, split, limit)
+    errors, ms = [], []
+    detectors = {}
+    for im in yud.images:
+        image = yud.read(im)
+        h, w = image.shape[:2]
+        if (w, h) not in detectors:
+            detectors[(w, h)] = lu_vp_detector(
+                yud.f_true if focal_given else LU_DEFAULT_FOCAL_PX,
+                ((w - 1) / 2.0, (h - 1) / 2.0))
+        t0 = time.perf_counter()
+        vps = detectors[(w, h)](image)
+        ms.append((time.perf_counter() - t0) * 1e3)
+        errors.extend(yud.errors_deg(im, list(vps)))
+    return YudReport(
+        split=split, images=len(yud.images), focal_given=focal_given,
+        errors_deg=np.asarray(errors), ms_per_image=float(np.median(ms)) if ms else 0.0,
+        focal_estimates_px=np.zeros(0), true_focal_px=yud.f_true,
+        assign_precision=None, assign_recall=None, method="lu-vp-detect")
+
+
 def format_yud(reports: list[YudReport]) -> list[str]:
-    lines = [f"{'focal':<10}{'images':>7}{'AA@3°':>8}{'AA@5°':>8}{'AA@10°':>8}"
+    """A table, one row per report (method × focal given or not)."""
+    lines = [f"{'method':<14}{'focal':<10}{'images':>7}{'AA@3°':>8}{'AA@5°':>8}{'AA@10°':>8}"
              f"{'median':>9}{'ms/img':>8}{'assign P/R':>13}  focal estimate"]
     for r in reports:
         f = r.figures()
         est = (f"median {f['focal_median_px']} px on {f['focal_estimated_on']} images "
                f"(true {r.true_focal_px:.1f})" if f["focal_median_px"] else "—")
+        pr = ("—" if f["assign_precision"] is None
+              else f"{f['assign_precision']:.2f}/{f['assign_recall']:.2f}")
+        focal = "given" if r.focal_given else "estimated" if r.method == "companion" else "default"
         lines.append(
-            f"{'given' if r.focal_given else 'estimated':<10}{f['images']:>7}{f['aa3']:>8.1f}"
+            f"{r.method:<14}{focal:<10}{f['images']:>7}{f['aa3']:>8.1f}"
             f"{f['aa5']:>8.1f}{f['aa10']:>8.1f}{f['median_err_deg']:>8.2f}°"
-            f"{f['ms_per_image']:>8.1f}{f['assign_precision']:>7.2f}/{f['assign_recall']:.2f}"
-            f"  {est if not r.focal_given else '—'}")
+            f"{f['ms_per_image']:>8.1f}{pr:>13}  {est if not r.focal_given else '—'}")
     return lines
