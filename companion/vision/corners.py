@@ -125,9 +125,12 @@ def find_corners(
 
     # 1. L_s, L_n: non-vertical segments whose endpoints meet (O×O, min over 2×2 ends).
     oe = ends[others]
-    gap = np.linalg.norm(oe[:, None, :, None, :] - oe[None, :, None, :, :], axis=4)
-    near = gap.reshape(len(others), len(others), 4).min(axis=2) <= p.radius_px
-    i, j = np.nonzero(np.triu(near, k=1))
+    # Squared distances, upper triangle only: this O² step is the stage's main cost.
+    i, j = np.triu_indices(len(others), k=1)
+    diff = oe[i][:, :, None, :] - oe[j][:, None, :, :]
+    near = (np.einsum("pabk,pabk->pab", diff, diff).reshape(len(i), 4).min(axis=1)
+            <= p.radius_px ** 2)
+    i, j = i[near], j[near]
     si, ni = others[i], others[j]
     apart = _sin_between(dirs[si], dirs[ni]) >= min_sin
     si, ni = si[apart], ni[apart]

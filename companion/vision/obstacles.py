@@ -74,12 +74,15 @@ class Obstacle:
     lambda3_deg: float
 
 
-def _collinearity_px(seg_a: np.ndarray, seg_b: np.ndarray) -> float:
-    """λ1 (eq. 6): largest distance of either segment's endpoints from the other's line."""
-    la, lb = segment_lines(np.vstack([seg_a, seg_b]))
-    pa = np.array([[seg_a[0], seg_a[1], 1.0], [seg_a[2], seg_a[3], 1.0]])
-    pb = np.array([[seg_b[0], seg_b[1], 1.0], [seg_b[2], seg_b[3], 1.0]])
-    return float(max(np.abs(pb @ la).max(), np.abs(pa @ lb).max()))
+def _collinearity_px(seg: np.ndarray, line: np.ndarray, others: np.ndarray,
+                     other_lines: np.ndarray) -> np.ndarray:
+    """λ1 (eq. 6) of one segment against each of ``others``: the largest distance of
+    either segment's endpoints from the other's line (lines as :func:`segment_lines`)."""
+    ends = others.reshape(-1, 2, 2)
+    from_seg_line = np.abs(ends @ line[:2] + line[2]).max(axis=1)
+    pts = seg.reshape(2, 2)
+    from_other_lines = np.abs(pts @ other_lines[:, :2].T + other_lines[:, 2]).max(axis=0)
+    return np.maximum(from_seg_line, from_other_lines)
 
 
 def _horizon_error_deg(d, d3) -> float:
@@ -94,7 +97,7 @@ def _ovp_error_deg(d1, d2, d3) -> tuple[float, float]:
     return float(horizon), float(ortho)
 
 
-def _far_end(g: int, corners: Corners, segments, verticals, p: ObstacleParams):
+def _far_end(g: int, corners: Corners, segments, lines, verticals, p: ObstacleParams):
     """The other end of corner g's vertical edge, following collinear V3 segments.
 
     Returns (point, edge length) or None. Segments on the line of ``L_r^g`` (λ1, eq. 6)
@@ -107,15 +110,13 @@ def _far_end(g: int, corners: Corners, segments, verticals, p: ObstacleParams):
     if np.linalg.norm(u) < 1e-9:
         return None
     u /= np.linalg.norm(u)
-    best, reach = None, 0.0
-    for v in verticals:
-        if v != corners.r[g] and _collinearity_px(rg, segments[v]) > p.collinear_px:
-            continue
-        for end in (segments[v, :2], segments[v, 2:]):
-            along = float((end - pc) @ u)
-            if along > reach:
-                best, reach = end, along
-    if best is None or reach < p.min_edge_px:
+    r = corners.r[g]
+    on_edge = verticals[(verticals == r) | (_collinearity_px(
+        rg, lines[r], segments[verticals], lines[verticals]) <= p.collinear_px)]
+    if len(on_edge) == 0:
+        return None
+    reach = float(((segments[on_edge].reshape(-1, 2) - pc) @ u).max())
+    if reach < p.min_edge_px:
         return None
     return pc + reach * u, reach
 
@@ -184,7 +185,7 @@ def find_obstacles(
     # (d1, d2, λ3, edge length, corner indices, extra leg segments, extra corner points)
     found: list[tuple] = []
     for g in range(len(corners)):
-        far = _far_end(g, corners, s, verticals, p)
+        far = _far_end(g, corners, s, lines, verticals, p)
         if far is None:
             continue
         e, edge = far
@@ -340,7 +341,7 @@ def _vertical_chains(s, verticals, p: ObstacleParams, radius_px, leg_gap_frac):
 
     Returns a list of (end_a, end_b, length) with the two extreme endpoints.
     """
-    chains, seen = [], set()
+    chains = []
     if len(verticals) == 0:
         return chains
     lines = segment_lines(s[verticals])
@@ -350,15 +351,22 @@ def _vertical_chains(s, verticals, p: ObstacleParams, radius_px, leg_gap_frac):
     # piece's own direction is too noisy to extrapolate along a long edge.
     dist = np.abs(np.einsum("ik,jek->ije", lines, pts_h)).max(axis=2)
     shorter_from_longer = np.where(lengths[:, None] >= lengths[None, :], dist, dist.T)
-    for iv, v in enumerate(verticals):
-        members = [v] + [w for jw, w in enumerate(verticals)
-                         if w != v and shorter_from_longer[iv, jw] <= p.collinear_px]
-        key = frozenset(members)
-        if key in seen:
+    collinear = shorter_from_longer <= p.collinear_px
+    np.fill_diagonal(collinear, True)
+    # One chain per distinct set of collinear members, grown from its first segment.
+    _, first = np.unique(collinear, axis=0, return_index=True)
+    singles = collinear.sum(axis=1) == 1
+    for iv in np.sort(first):
+        if singles[iv]:  # most vertical segments: the chain is the segment itself
+            if lengths[iv] >= 2 * p.min_edge_px:
+                v = verticals[iv]
+                chains.append((s[v, :2].copy(), s[v, 2:].copy(), float(lengths[iv])))
             continue
-        seen.add(key)
+        others = np.flatnonzero(collinear[iv])
+        local = np.concatenate([[iv], others[others != iv]])
+        members = verticals[local]
         # Measure along the longest member: its direction is the most accurate.
-        base = max(members, key=lambda m: lengths[np.searchsorted(verticals, m)])
+        base = members[int(np.argmax(lengths[local]))]
         origin = s[base, :2]
         axis = s[base, 2:] - origin
         axis /= max(np.linalg.norm(axis), 1e-9)
@@ -384,24 +392,29 @@ def _edge_legs(s, verticals, free_idx, ends, p: ObstacleParams, radius_px, leg_g
     side): the side (±1) of the edge it leaves toward. Legs are at least 20° off the edge.
     """
     out = []
-    if len(free_idx) == 0:
+    chains = _vertical_chains(s, verticals, p, radius_px, leg_gap_frac)
+    if len(free_idx) == 0 or not chains:
         return out
-    for end_a, end_b, length in _vertical_chains(s, verticals, p, radius_px, leg_gap_frac):
+    # Every chain end against every free segment's two ends at once (2C × F × 2).
+    chain_ends = np.array([[a, b] for a, b, _ in chains]).reshape(-1, 2)
+    free_ends = ends[free_idx]
+    diff = free_ends[None] - chain_ends[:, None, None, :]
+    dist2 = np.einsum("cfek,cfek->cfe", diff, diff)
+    near_end = np.argmin(dist2, axis=2)  # which end of the leg is at the chain end
+    near = dist2.min(axis=2) <= radius_px ** 2
+    min_sin = np.sin(np.radians(20.0))
+    for c, (end_a, end_b, length) in enumerate(chains):
         axis = (end_b - end_a) / length
         both = []
-        for end in (end_a, end_b):
-            dist = np.linalg.norm(ends[free_idx] - end[None, None, :], axis=2)
-            near = dist.min(axis=1) <= radius_px
-            legs = []
-            for k, j in zip(free_idx[near], np.argmin(dist[near], axis=1), strict=True):
-                away = ends[k, 1 - j] - ends[k, j]
-                norm = np.linalg.norm(away)
-                if norm < p.min_edge_px:
-                    continue
-                cross = float(axis[0] * away[1] - axis[1] * away[0]) / norm
-                if abs(cross) >= np.sin(np.radians(20.0)):
-                    legs.append((int(k), np.sign(cross)))
-            both.append(legs)
+        for e in (2 * c, 2 * c + 1):
+            ks = np.flatnonzero(near[e])
+            j = near_end[e, ks]
+            away = free_ends[ks, 1 - j] - free_ends[ks, j]
+            norm = np.linalg.norm(away, axis=1)
+            cross = (axis[0] * away[:, 1] - axis[1] * away[:, 0]) / np.maximum(norm, 1e-12)
+            keep = (norm >= p.min_edge_px) & (np.abs(cross) >= min_sin)
+            both.append([(int(free_idx[k]), np.sign(x))
+                         for k, x in zip(ks[keep], cross[keep], strict=True)])
         if both[0] or both[1]:
             out.append((end_a, end_b, length, both[0], both[1]))
     return out
