@@ -42,13 +42,21 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--annotate", metavar="OUT.mp4", help="write an annotated video")
     ap.add_argument("--focal-px", type=float, metavar="F", help="known focal length in pixels")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
-    sub = ap.add_subparsers(dest="command", metavar="{run,eval}")
+    sub = ap.add_subparsers(dest="command", metavar="{run,eval,sim,bench}")
     rn = sub.add_parser("run", help="the service: camera → pipeline → PX4 offboard")
     rn.add_argument("--config", metavar="PATH", dest="run_config",
                     help="YAML config (default: built-in defaults, offboard disabled)")
     rn.add_argument("--source", metavar="SRC",
                     help="camera index or /dev path, video file or image folder "
                          "(default: camera.device from the config)")
+    sm = sub.add_parser("sim", help="the closed loop in simulation (renderer, MAVSDK, mock PX4)")
+    from sitl.closed_loop import add_arguments as add_sim_arguments
+
+    add_sim_arguments(sm)
+    bn = sub.add_parser("bench", help="time every stage; frame-to-setpoint latency in SITL")
+    from sitl.bench import add_arguments as add_bench_arguments
+
+    add_bench_arguments(bn)
     ev = sub.add_parser("eval", help="accuracy on seeded synthetic scenes")
     ev.add_argument("--scenes", type=int, default=200, help="number of scenes (default 200)")
     ev.add_argument("--seed", type=int, default=0, help="seed of the scene set (default 0)")
@@ -286,6 +294,20 @@ def main(argv: list[str] | None = None) -> int:
             return run_eval(args)
         if args.command == "run":
             return run_live(args)
+        if args.command == "sim":
+            from sitl.closed_loop import simulate
+
+            try:
+                return simulate(args)
+            except ValueError as exc:
+                raise UserError(str(exc)) from None
+        if args.command == "bench":
+            from sitl.bench import bench
+
+            try:
+                return bench(args, _config(args.bench_config, None))
+            except ValueError as exc:
+                raise UserError(str(exc)) from None
         if args.video is None:
             ap.print_usage(sys.stderr)
             raise UserError("nothing to do: give --video FILE --dry-run, or a command (eval)")

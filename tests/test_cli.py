@@ -208,3 +208,23 @@ def test_eval_prints_figures(tmp_path):
     fig = json.loads(js.read_text())
     assert fig["scenes"] == 3
     assert fig["detectable"] + fig["manhattan_only"] + fig["not_detectable"] == 3
+
+
+def test_bench_prints_ratios_and_writes_the_json_keys(tmp_path):
+    out = tmp_path / "bench.json"
+    r = run("bench", "--frames", "2", "--repeat", "1", "--resolutions", "320x240", "640x480",
+            "--no-sitl", "--json", out, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "total/detector" in r.stdout and "peak RSS" in r.stdout
+    figures = json.loads(out.read_text())["resolutions"]
+    assert set(figures) == {"320x240", "640x480"}
+    for f in figures.values():
+        for key in ("total_ms_median", "total_ms_p99", "detector_ms_median", "lsd_ms_median"):
+            assert f[key] > 0
+        assert f["frames"] == 2
+        assert f["total_ms_p99"] >= f["total_ms_median"]
+
+
+def test_bench_and_sim_reject_bad_arguments_in_one_line():
+    _assert_one_line_error(run("bench", "--resolutions", "640by480", "--no-sitl"), "WxH")
+    _assert_one_line_error(run("sim", "--eta0", "120"), "between -89 and 89")

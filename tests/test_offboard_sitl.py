@@ -319,3 +319,22 @@ def test_simulation_only_arm_and_takeoff_waits_for_px4_then_engages(port):
         assert ap.vehicle.armed and ap.vehicle.in_air
     rejected = [r for _, cmd, r in ap.acks if cmd == 400 and r == 1]
     assert rejected, "arming before the mock was ready must have been refused and retried"
+
+
+def test_a_new_decision_goes_out_at_once_not_at_the_next_tick(port):
+    # Ticks every 0.4 s: a setpoint that waited for the tick would arrive ~0.2 s late on average.
+    config = fly_config(port, setpoint_rate_hz=2.5, stale_after_s=5.0, hold_after_s=10.0)
+    delays = []
+    with in_air_autopilot(port) as ap, Running(config) as run:
+        with Camera(run.controller, FORWARD):
+            wait_active(ap, run)
+        for k in range(6):
+            rate = 5.0 + k
+            t0 = time.monotonic()
+            run.controller.submit(TurnCommand("right", rate, rate), rate)
+            assert ap.wait_for(lambda r=rate, t0=t0: any(
+                abs(s.yaw_rate_deg_s - r) < 1e-3 for s in ap.setpoints_since(t0)), 1.0)
+            first = next(s for s in ap.setpoints_since(t0) if abs(s.yaw_rate_deg_s - rate) < 1e-3)
+            delays.append(first.t_s - t0)
+            time.sleep(0.13 * (k % 3))  # land at different phases of the tick
+    assert max(delays) < 0.1, delays

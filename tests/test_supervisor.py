@@ -11,6 +11,7 @@ from companion.control.supervisor import (
     enable,
     initial_state,
     supervise,
+    turn_ends_at,
     yaw_rate_setpoint,
 )
 
@@ -102,3 +103,13 @@ def test_one_decision_turns_at_most_the_cap():
     assert min(rates) == -30.0  # rate capped
     assert sum(rates) / 100 == pytest.approx(-30.0, abs=0.31)  # turn capped at 30°
     assert rates[-1] == 0.0
+
+
+def test_the_turn_ends_where_the_setpoint_drops_to_zero():
+    huge = Decision(2.0, TurnCommand("left", -90.0, -90.0))
+    end = turn_ends_at(huge, POLICY)
+    assert end == pytest.approx(3.0)  # 30° cap at the 30°/s cap
+    assert yaw_rate_setpoint(huge, end - 1e-3, 100.0, POLICY) == -30.0
+    assert yaw_rate_setpoint(huge, end + 1e-4, 100.0, POLICY) == 0.0
+    assert turn_ends_at(Decision(0.0, TurnCommand("forward", 0.0, 0.0)), POLICY) is None
+    assert turn_ends_at(None, POLICY) is None

@@ -69,6 +69,9 @@ class OffboardController:
         self.state = sv.initial_state(config.offboard)
         self.events: list[str] = []  # every state-change message, in order (also logged)
         self.connected = False  # the autopilot's link, as MAVSDK sees it
+        # Set by submit() so a new decision goes out at once, not at the next tick.
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._wake: asyncio.Event | None = None
 
     # ------------------------------------------------------------------ any thread
     def submit(self, command: TurnCommand, eta_deg: float | None = None,
@@ -77,6 +80,10 @@ class OffboardController:
         decision = sv.Decision(time.monotonic() if t_s is None else t_s, command, eta_deg)
         with self._lock:
             self._decision = decision
+            loop, wake = self._loop, self._wake
+        if loop is not None and wake is not None:
+            with contextlib.suppress(RuntimeError):  # the loop has just closed
+                loop.call_soon_threadsafe(wake.set)
 
     def enable(self) -> None:
         """Allow offboard again after a release (pilot override, stall, link loss)."""
@@ -94,6 +101,8 @@ class OffboardController:
 
         cfg = self.config
         _route_mavsdk_log()
+        with self._lock:
+            self._loop, self._wake = asyncio.get_running_loop(), asyncio.Event()
         mavsdk_config = Configuration.create_with_component_type(
             ComponentType.COMPANION_COMPUTER)
         async with Mavsdk(mavsdk_config) as mavsdk:
@@ -223,8 +232,13 @@ class _Session:
         report_every_s = 1.0 / cfg.offboard.eta_report_hz if cfg.offboard.eta_report_hz else 0
         next_report_s = 0.0
         self.deadman.start()
+        wake = ctl._wake or asyncio.Event()
+        relay = asyncio.ensure_future(stop.wait())
+        relay.add_done_callback(lambda _: wake.set())
+        self.tasks.append(relay)
         next_tick = time.monotonic()
         while not stop.is_set():
+            wake.clear()  # a decision submitted from here on wakes the next tick
             now = time.monotonic()
             self.last_tick_s = now
             decision, enable = ctl._take()
@@ -255,13 +269,18 @@ class _Session:
                 await self._send("NAMED_VALUE_FLOAT", {
                     "time_boot_ms": int(now * 1000) & 0xFFFFFFFF, "name": "eta_deg",
                     "value": round(float(decision.eta_deg), 3)})
-            next_tick += period_s
-            delay = next_tick - time.monotonic()
-            if delay < -period_s:  # fell behind (e.g. a slow MAVSDK call): don't burst
-                next_tick = time.monotonic()
-                delay = 0.0
+            # Ticks at setpoint_rate_hz, plus one at once for every new decision.
+            if time.monotonic() >= next_tick:
+                next_tick += period_s
+                if next_tick < time.monotonic() - period_s:  # fell behind: don't burst
+                    next_tick = time.monotonic()
+            wake_at = next_tick
+            turn_end = sv.turn_ends_at(decision, cfg.policy)
+            if turn_end is not None and now < turn_end < wake_at:
+                wake_at = turn_end + 1e-4  # just past it, so the tick sees the turn done
+            delay = max(0.0, wake_at - time.monotonic())
             with contextlib.suppress(asyncio.TimeoutError):
-                await asyncio.wait_for(stop.wait(), timeout=max(0.0, delay))
+                await asyncio.wait_for(wake.wait(), timeout=delay)
 
     async def _release(self) -> None:
         """Stop streaming without touching the flight mode.

@@ -27,7 +27,7 @@ from companion.control.policy import TurnCommand
 
 __all__ = [
     "Decision", "Step", "SupervisorState", "VehicleStatus", "enable", "initial_state", "supervise",
-    "yaw_rate_setpoint",
+    "turn_ends_at", "yaw_rate_setpoint",
 ]
 
 StateName = Literal["disabled", "waiting", "engaging", "active", "link_lost"]
@@ -97,6 +97,18 @@ def yaw_rate_setpoint(decision: Decision | None, now_s: float, stale_after_s: fl
     rate = math.copysign(min(abs(rate), policy.max_yaw_rate_deg_s), rate)
     turn_deg = min(abs(decision.command.turn_deg), policy.max_turn_deg)
     return rate if age_s * abs(rate) < turn_deg else 0.0
+
+
+def turn_ends_at(decision: Decision | None, policy: PolicyConfig) -> float | None:
+    """When (monotonic s) :func:`yaw_rate_setpoint` drops the decision's rate to 0 because
+    its turn is complete; None if it asks for no turn. The shell ticks then, so the cap
+    holds to the millisecond rather than to the next setpoint tick."""
+    if decision is None:
+        return None
+    rate = min(abs(decision.command.yaw_rate_deg_s), policy.max_yaw_rate_deg_s)
+    if rate == 0.0 or not math.isfinite(rate):
+        return None
+    return decision.t_s + min(abs(decision.command.turn_deg), policy.max_turn_deg) / rate
 
 
 def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision | None,
