@@ -71,9 +71,11 @@ def _time_resolution(video: str, focal_px: float | None, repeat: int,
     rows: dict[str, list[float]] = {k: [] for k in ("decode", *STAGES, "total",
                                                     "detector", "lsd", "segments")}
     detector = lsd = None
-    warm = _frames(video)[:1]
-    if warm:  # first-call costs (allocations, lazy imports) are not per-frame costs
-        pipeline(warm[0])
+    cap = cv2.VideoCapture(video)
+    ok, first = cap.read()
+    cap.release()
+    if ok:  # first-call costs (allocations, lazy imports) are not per-frame costs
+        pipeline(first)
     for _ in range(repeat):
         cap = cv2.VideoCapture(video)
         while True:
@@ -104,8 +106,20 @@ def _time_resolution(video: str, focal_px: float | None, repeat: int,
         cap.release()
     out = {k: _stats(v) for k, v in rows.items()}
     out["frames"] = len(rows["total"])
-    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    out["peak_rss_mb"] = _peak_rss_mb()
     return out
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident set, MB. VmHWM, not getrusage's ru_maxrss: Linux carries
+    the forking parent's peak into ru_maxrss across exec, and the parent rendered scenes."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _setpoint_latency(video: str, focal_px: float, repeat: int, config: Config,
