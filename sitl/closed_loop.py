@@ -34,7 +34,6 @@ from companion.config import Config, MavlinkConfig, OffboardConfig
 from companion.control.offboard import OffboardController
 from companion.control.policy import decide_turn
 from companion.vision.pipeline import Pipeline
-from sitl.autopilot import AutopilotParams, MockAutopilot
 from sitl.scene import EAST, NORTH, WEST, Box, Camera, Room, Scene, WallRect, render
 
 __all__ = ["LoopFrame", "LoopRun", "format_table", "loop_scene", "run_closed_loop",
@@ -149,6 +148,10 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
     frames: list[LoopFrame] = []
     done = threading.Event()
     t_first: list[float] = []
+
+    # Here, not at the top: `companion --help` and the dry-run build the `sim` parser
+    # from this module and must not need the mavlink extra.
+    from sitl.autopilot import AutopilotParams, MockAutopilot
 
     # The mock sends to ``port``, where MAVSDK listens (udpin).
     with MockAutopilot(port, AutopilotParams(boot_in_air=True, arm_ready_s=0.2)) as mock:

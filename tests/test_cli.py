@@ -228,3 +228,14 @@ def test_bench_prints_ratios_and_writes_the_json_keys(tmp_path):
 def test_bench_and_sim_reject_bad_arguments_in_one_line():
     _assert_one_line_error(run("bench", "--resolutions", "640by480", "--no-sitl"), "WxH")
     _assert_one_line_error(run("sim", "--eta0", "120"), "between -89 and 89")
+
+
+def test_dry_run_needs_no_mavlink_packages(sample_video):
+    # The `mavlink` extra is optional: without pymavlink and mavsdk the dry-run still works.
+    code = ("import sys; sys.modules['pymavlink'] = sys.modules['mavsdk'] = None; "
+            "from companion.cli import main; "
+            f"sys.exit(main(['--video', {str(sample_video[0])!r}, '--dry-run', '--no-progress']))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    assert "frames:" in r.stdout
