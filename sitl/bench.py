@@ -17,7 +17,6 @@ carries the frame's new yaw rate.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 import multiprocessing
 import resource
@@ -29,7 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.config import Config, MavlinkConfig, OffboardConfig
+from companion.config import Config
 from companion.control.policy import decide_turn
 from companion.vision.lines import make_detector, to_gray
 from companion.vision.pipeline import STAGES, Pipeline
@@ -126,24 +125,22 @@ def _setpoint_latency(video: str, focal_px: float, repeat: int, config: Config,
                       port: int) -> list[float]:
     """Capture → setpoint at the mock, ms, for every frame whose yaw rate changed."""
     from companion.control.offboard import OffboardController
-    from sitl.autopilot import AutopilotParams, MockAutopilot
+    from sitl.closed_loop import fly_alongside, hovering_autopilot, sitl_link
 
-    cfg = replace(config, camera=replace(config.camera, focal_px=focal_px),
-                  mavlink=MavlinkConfig(url=f"udpin://127.0.0.1:{port}", connect_timeout_s=10.0),
-                  offboard=replace(config.offboard or OffboardConfig(), enabled=True,
-                                   stale_after_s=2.0))
+    cfg = sitl_link(replace(config, camera=replace(config.camera, focal_px=focal_px)), port,
+                    stale_after_s=2.0)
     pipeline = Pipeline(cfg)
     controller = OffboardController(cfg)
     samples: list[tuple[float, float]] = []  # (capture t, yaw rate)
     latencies: list[float] = []
-    with MockAutopilot(port, AutopilotParams(boot_in_air=True, arm_ready_s=0.2)) as mock:
+    with hovering_autopilot(port) as mock:
 
         def camera() -> None:
             frames = _frames(video)
+            warm_up = decide_turn(pipeline(frames[0]).eta_deg, cfg.policy)
             deadline = time.monotonic() + 15.0  # engaging: the first frames are warm-up
             while controller.state.name != "active" and time.monotonic() < deadline:
-                cmd = decide_turn(pipeline(frames[0]).eta_deg, cfg.policy)
-                controller.submit(cmd)
+                controller.submit(warm_up)
                 time.sleep(0.05)
             last_rate = None
             for frame in frames * repeat:
@@ -158,15 +155,7 @@ def _setpoint_latency(video: str, focal_px: float, repeat: int, config: Config,
                 last_rate = cmd.yaw_rate_deg_s
                 time.sleep(0.1)  # a 10 Hz camera: every setpoint settles before the next
 
-        async def fly() -> None:
-            stop = asyncio.Event()
-            session = asyncio.ensure_future(controller.run(stop))
-            await asyncio.to_thread(camera)
-            await asyncio.sleep(0.2)
-            stop.set()
-            await session
-
-        asyncio.run(fly())
+        fly_alongside(controller, camera, linger_s=0.2)
         received = list(mock.setpoints)
     for t_cap, rate in samples:
         hit = next((s.t_s for s in received

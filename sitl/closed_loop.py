@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import math
-import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -30,14 +29,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.config import Config, MavlinkConfig, OffboardConfig
+from companion.config import Config, MavlinkConfig
 from companion.control.offboard import OffboardController
 from companion.control.policy import decide_turn
 from companion.vision.pipeline import Pipeline
 from sitl.scene import EAST, NORTH, WEST, Box, Camera, Room, Scene, WallRect, render
 
-__all__ = ["LoopFrame", "LoopRun", "format_table", "loop_scene", "run_closed_loop",
-           "write_plot", "STARTS_DEG"]
+__all__ = ["LoopFrame", "LoopRun", "fly_alongside", "format_table", "hovering_autopilot",
+           "loop_scene", "run_closed_loop", "sitl_link", "write_plot", "STARTS_DEG"]
 
 STARTS_DEG = (30.0, -30.0, 60.0, -60.0, 75.0, -75.0)
 BOX_YAW_DEG = 30.0  # the obstacle's yaw against the room: clearly non-Manhattan
@@ -112,16 +111,50 @@ def loop_config(cam: Camera, depth_px: float, port: int, base: Config | None = N
     cfg = base or Config()
     k = cam.focal_px / depth_px
     deadband = math.degrees(math.atan(k * math.tan(math.radians(cfg.policy.deadband_deg))))
-    return replace(
+    return sitl_link(replace(
         cfg,
         camera=replace(cfg.camera, focal_px=cam.focal_px),
         heading=replace(cfg.heading, depth_px=depth_px),
         policy=replace(cfg.policy, deadband_deg=deadband,
                        max_turn_deg=min(cfg.policy.max_turn_deg * k, 90.0),
                        turn_time_s=cfg.policy.turn_time_s * k),
-        mavlink=MavlinkConfig(url=f"udpin://127.0.0.1:{port}", connect_timeout_s=10.0),
-        offboard=replace(cfg.offboard or OffboardConfig(), enabled=True),
-    )
+    ), port)
+
+
+def sitl_link(base: Config, port: int, **offboard) -> Config:
+    """``base`` flying the mock autopilot on 127.0.0.1:``port``: offboard enabled, further
+    ``offboard`` keys replaced."""
+    return replace(base,
+                   mavlink=MavlinkConfig(url=f"udpin://127.0.0.1:{port}", connect_timeout_s=10.0),
+                   offboard=replace(base.offboard, enabled=True, **offboard))
+
+
+def hovering_autopilot(port: int, **params):
+    """The mock PX4, armed and hovering, sending to ``port`` where MAVSDK listens (udpin);
+    ``params`` replace further :class:`sitl.autopilot.AutopilotParams`.
+
+    Imported here, not at the top: `companion --help` and the dry-run build the `sim`
+    parser from this module and must not need the mavlink extra.
+    """
+    from sitl.autopilot import AutopilotParams, MockAutopilot
+
+    return MockAutopilot(port, AutopilotParams(**{"boot_in_air": True, "arm_ready_s": 0.2,
+                                                  **params}))
+
+
+def fly_alongside(controller: OffboardController, camera: Callable[[], None],
+                  linger_s: float = 0.0) -> None:
+    """Run ``controller``'s MAVSDK session while ``camera`` runs in a thread; ``linger_s``
+    after the camera returns, stop the session and wait for its safe stop."""
+    async def fly() -> None:
+        stop = asyncio.Event()
+        session = asyncio.ensure_future(controller.run(stop))
+        await asyncio.to_thread(camera)
+        await asyncio.sleep(linger_s)
+        stop.set()
+        await session
+
+    asyncio.run(fly())
 
 
 def _true_eta_deg(truth, depth_px: float) -> float:
@@ -131,9 +164,7 @@ def _true_eta_deg(truth, depth_px: float) -> float:
 
 def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int = 480,
                     max_frames: int = 80, settle_frames: int = 10, timeout_s: float = 60.0,
-                    frame_period_s: float = 0.2,
-                    config: Config | None = None,
-                    on_frame: Callable[[LoopFrame], None] | None = None) -> LoopRun:
+                    frame_period_s: float = 0.2, config: Config | None = None) -> LoopRun:
     """Fly one start to convergence (``settle_frames`` frames in the deadband) or to
     ``max_frames`` active frames; the mock autopilot listens on 127.0.0.1:``port``.
 
@@ -146,19 +177,13 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
     controller = OffboardController(cfg)
     deadband = cfg.policy.deadband_deg
     frames: list[LoopFrame] = []
-    done = threading.Event()
     t_first: list[float] = []
 
-    # Here, not at the top: `companion --help` and the dry-run build the `sim` parser
-    # from this module and must not need the mavlink extra.
-    from sitl.autopilot import AutopilotParams, MockAutopilot
-
-    # The mock sends to ``port``, where MAVSDK listens (udpin).
-    with MockAutopilot(port, AutopilotParams(boot_in_air=True, arm_ready_s=0.2)) as mock:
+    with hovering_autopilot(port) as mock:
         def camera() -> None:
             in_band = 0
             deadline = time.monotonic() + timeout_s
-            while not done.is_set() and time.monotonic() < deadline:
+            while time.monotonic() < deadline:
                 with mock.physics_paused():  # the camera exposes at once: draw in frozen time
                     heading = mock.yaw_deg
                     image, truth = render(scene, replace(cam0, yaw_deg=cam0.yaw_deg + heading),
@@ -180,21 +205,11 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
                     true_eta_deg=_true_eta_deg(truth, depth), action=cmd.action,
                     yaw_rate_deg_s=cmd.yaw_rate_deg_s, latency_ms=est.latency_ms)
                 frames.append(row)
-                if on_frame:
-                    on_frame(row)
                 in_band = in_band + 1 if row.action == "forward" else 0
                 if in_band >= settle_frames or len(frames) >= max_frames:
                     break
-            done.set()
 
-        async def fly() -> None:
-            stop = asyncio.Event()
-            session = asyncio.ensure_future(controller.run(stop))
-            await asyncio.to_thread(camera)
-            stop.set()
-            await session
-
-        asyncio.run(fly())
+        fly_alongside(controller, camera)
         t0 = t_first[0] if t_first else 0.0
         setpoints = [(s.t_s - t0, s.yaw_rate_deg_s) for s in mock.setpoints if s.t_s >= t0]
     return _score(eta0_deg, deadband, frames, setpoints, controller.events)

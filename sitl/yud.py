@@ -96,10 +96,9 @@ class _Yud:
             raise FileNotFoundError(f"cannot read {self.root / im['file']}")
         return image
 
-    def errors_deg(self, im: dict, vps: list[np.ndarray]) -> np.ndarray:
-        """Angular error of each of the image's true VPs, for homogeneous pixel VPs."""
-        return angular_errors_deg(np.asarray(im["vps_dir"], dtype=float),
-                                  [self.k_inv @ v for v in vps])
+    def directions(self, vps) -> list[np.ndarray]:
+        """3-D directions of homogeneous pixel VPs through the true intrinsics."""
+        return [self.k_inv @ v for v in vps]
 
 
 def _load(folder: str | Path, split: str, limit: int | None) -> _Yud:
@@ -129,16 +128,15 @@ def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = Tr
         ms.append((time.perf_counter() - t0) * 1e3)
         layout = est.layout
         rows = layout.usable_rows
-        errors.extend(yud.errors_deg(im, [layout.vps[i] for i in rows]))
+        dirs = yud.directions(layout.vps[list(rows)])
+        truth = np.asarray(im["vps_dir"], dtype=float)
+        errors.extend(angular_errors_deg(truth, dirs))
         if est.focal_source == "estimated":
             focals.append(est.focal_px)
         # Segment assignment: estimated VP i ↔ the true VP nearest to it.
-        truth = np.asarray(im["vps_dir"], dtype=float)
         truth = truth / np.linalg.norm(truth, axis=1, keepdims=True)
-        truth_of_est = {}
-        for i in rows:
-            d = yud.k_inv @ layout.vps[i]
-            truth_of_est[i] = int(np.argmax(np.abs(truth @ (d / np.linalg.norm(d)))))
+        truth_of_est = {i: int(np.argmax(np.abs(truth @ (d / np.linalg.norm(d)))))
+                        for i, d in zip(rows, dirs, strict=True)}
         segs = np.asarray(im["segments"], dtype=float).reshape(-1, 4)
         labels, _ = assign_segments(segs, layout.vps, cfg.vision.vanishing)
         gt = np.asarray(im["segment_vp"], dtype=int)
@@ -178,7 +176,8 @@ def evaluate_yud_lu(folder: str | Path, split: str = "test", focal_given: bool =
         t0 = time.perf_counter()
         vps = detectors[(w, h)](image)
         ms.append((time.perf_counter() - t0) * 1e3)
-        errors.extend(yud.errors_deg(im, list(vps)))
+        errors.extend(angular_errors_deg(np.asarray(im["vps_dir"], dtype=float),
+                                         yud.directions(vps)))
     return YudReport(
         split=split, images=len(yud.images), focal_given=focal_given,
         errors_deg=np.asarray(errors), ms_per_image=float(np.median(ms)) if ms else 0.0,

@@ -17,23 +17,21 @@ from pathlib import Path
 import pytest
 from helpers.processes import free_udp_port, stop_with_sigterm
 
-from companion.config import Config, MavlinkConfig, OffboardConfig, PolicyConfig
+from companion.config import Config, MavlinkConfig, PolicyConfig
 from companion.control.offboard import OffboardController
 from companion.control.policy import TurnCommand
 from sitl.autopilot import HOLD, OFFBOARD, POSCTL, AutopilotParams, MockAutopilot
+from sitl.closed_loop import hovering_autopilot, sitl_link
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def in_air_autopilot(port: int, **params) -> MockAutopilot:
-    return MockAutopilot(port, AutopilotParams(arm_ready_s=0.2, boot_in_air=True,
-                                               **params)).start()
+    return hovering_autopilot(port, **params).start()
 
 
 def fly_config(port: int, policy: PolicyConfig | None = None, **offboard) -> Config:
-    return Config(mavlink=MavlinkConfig(url=f"udpin://127.0.0.1:{port}", connect_timeout_s=10),
-                  offboard=replace(OffboardConfig(enabled=True), **offboard),
-                  policy=policy or PolicyConfig())
+    return sitl_link(Config(policy=policy or PolicyConfig()), port, **offboard)
 
 
 class Running:
