@@ -126,7 +126,7 @@ def dry_run(args) -> int:
     """Pipeline + policy on every frame of ``args.video``; prints a summary."""
     import cv2
 
-    from companion.control.policy import decide_turn
+    from companion.control.policy import TurnHistory, confirm_reversal, decide_turn
     from companion.report import DecisionLog, Summary, annotate, log_record
     from companion.vision.pipeline import Pipeline
 
@@ -161,11 +161,13 @@ def dry_run(args) -> int:
     progress = _Progress(not args.no_progress)
     interrupted = False
     start = time.perf_counter()
+    history = TurnHistory()
     try:
         for frame in video:
             t0 = time.perf_counter()
             est = pipeline(frame.image)
-            cmd = decide_turn(est.eta_deg, cfg.policy, est.scene_understood)
+            cmd, history = confirm_reversal(
+                decide_turn(est.eta_deg, cfg.policy, est.scene_understood), history)
             latency_ms = (time.perf_counter() - t0) * 1e3
             summary.add(est, latency_ms)
             if log:

@@ -34,7 +34,7 @@ import numpy as np
 from companion.capture import LatestFrame, is_camera, open_source
 from companion.config import Config
 from companion.control.offboard import AutopilotNotFound, OffboardController
-from companion.control.policy import decide_turn
+from companion.control.policy import TurnHistory, confirm_reversal, decide_turn
 from companion.notify import notify
 from companion.report import log_record
 from companion.vision.pipeline import Pipeline
@@ -80,6 +80,7 @@ def _decision_log(config: Config) -> logging.Logger | None:
 def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardController,
                  health: _Health, stop: threading.Event, decisions: logging.Logger | None):
     pipeline = Pipeline(config)
+    history = TurnHistory()
     while not stop.is_set():
         frame = frames.get(timeout_s=0.2)
         if frame is None:
@@ -87,7 +88,8 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
                 return
             continue
         est = pipeline(frame.image)
-        cmd = decide_turn(est.eta_deg, config.policy, est.scene_understood)
+        cmd, history = confirm_reversal(
+            decide_turn(est.eta_deg, config.policy, est.scene_understood), history)
         controller.submit(cmd, est.eta_deg, t_s=frame.captured_s)
         now = time.monotonic()
         health.decisions += 1

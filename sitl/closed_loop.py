@@ -31,7 +31,7 @@ import numpy as np
 
 from companion.config import Config, MavlinkConfig
 from companion.control.offboard import OffboardController
-from companion.control.policy import decide_turn
+from companion.control.policy import TurnHistory, confirm_reversal, decide_turn
 from companion.vision.pipeline import Pipeline
 from sitl.scene import EAST, NORTH, WEST, Box, Camera, Room, Scene, WallRect, render
 
@@ -182,6 +182,7 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
     with hovering_autopilot(port) as mock:
         def camera() -> None:
             in_band = 0
+            history = TurnHistory()
             deadline = time.monotonic() + timeout_s
             while time.monotonic() < deadline:
                 with mock.physics_paused():  # the camera exposes at once: draw in frozen time
@@ -190,7 +191,8 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
                                           supersample=1)
                 t_cap = time.monotonic()
                 est = pipeline(image)
-                cmd = decide_turn(est.eta_deg, cfg.policy, est.scene_understood)
+                cmd, history = confirm_reversal(
+                    decide_turn(est.eta_deg, cfg.policy, est.scene_understood), history)
                 controller.submit(cmd, est.eta_deg, t_s=t_cap)
                 time.sleep(max(0.0, t_cap + frame_period_s - time.monotonic()))
                 if controller.state.name != "active":

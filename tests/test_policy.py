@@ -37,3 +37,18 @@ def test_no_scene_understanding_or_nan_holds():
     assert decide_turn(20.0, P, scene_understood=False).action == "hold"
     assert decide_turn(math.nan, P).action == "hold"
     assert decide_turn(math.nan, P).yaw_rate_deg_s == 0.0
+
+
+def test_a_reversal_needs_two_frames_in_a_row():
+    from companion.control.policy import TurnHistory, confirm_reversal
+
+    history = TurnHistory()
+    actions = []
+    for eta in (-20.0, -8.0, 1.0, 25.0, 1.0, 15.0, 12.0, 9.0, -10.0):
+        cmd, history = confirm_reversal(decide_turn(eta, P), history)
+        actions.append(cmd.action)
+    # left, left, forward; one stray right is not flown; two rights in a row are; then a
+    # single left against them is not.
+    assert actions == ["left", "left", "forward", "forward", "forward", "forward", "right",
+                       "right", "forward"]
+    assert cmd.yaw_rate_deg_s == 0.0

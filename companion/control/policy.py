@@ -11,6 +11,10 @@ at a maximum turning angle (the paper's preset maximum), ``|η|`` within a deadb
 as ``D_t = 0`` (η never is exactly 0 on real images), and the turn is executed as a yaw
 rate ``turn / turn_time_s`` capped at ``max_yaw_rate_deg_s``. Sign: positive yaw rate turns
 right (body FRD / NED, as PX4 and MAVSDK use).
+
+Across frames, :func:`confirm_reversal` adds one more rule: a turn against the last turn
+made needs two frames in a row asking for it. Near convergence a single frame can read M
+on the wrong side of the centre; alone it must not swing the vehicle back.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from typing import Literal
 
 from companion.config import PolicyConfig
 
-__all__ = ["TurnCommand", "decide_turn"]
+__all__ = ["TurnCommand", "TurnHistory", "confirm_reversal", "decide_turn"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
@@ -54,3 +58,27 @@ def decide_turn(
     rate = turn / policy.turn_time_s
     rate = math.copysign(min(abs(rate), policy.max_yaw_rate_deg_s), turn)
     return TurnCommand("right" if turn > 0 else "left", turn, rate)
+
+
+@dataclass(frozen=True)
+class TurnHistory:
+    """What :func:`confirm_reversal` remembers: the last turn made (``left``/``right``) and
+    what the previous frame asked for, before confirmation."""
+
+    last_turn: Action | None = None
+    previous: Action | None = None
+
+
+def confirm_reversal(command: TurnCommand, history: TurnHistory
+                     ) -> tuple[TurnCommand, TurnHistory]:
+    """The frame's command after the reversal rule, and the history for the next frame.
+
+    A ``left``/``right`` opposite to ``history.last_turn`` is flown only when the previous
+    frame asked for the same; otherwise this frame goes ``forward`` (yaw rate 0).
+    """
+    asked = command.action
+    if (asked in ("left", "right") and history.last_turn not in (None, asked)
+            and history.previous != asked):
+        command = TurnCommand("forward", 0.0, 0.0)
+    turned = command.action if command.action in ("left", "right") else history.last_turn
+    return command, TurnHistory(last_turn=turned, previous=asked)
