@@ -264,7 +264,11 @@ def run_eval_yud(args) -> int:
     peer = next((r for r in reports if r.focal_given and r.method != "companion"), None)
     if peer is not None and ours.ms_per_image > 0:
         print(f"speed, focal given: companion {peer.ms_per_image / ours.ms_per_image:.1f}× "
-              f"faster per image than {peer.method} (median ms, same images, same run)")
+              f"faster per image than {peer.method} (median ms from image to layout VPs, "
+              "same images, same run)")
+    if ours.pipeline_ms_per_image is not None:
+        print(f"the whole companion pipeline (VPs, corners, obstacles, η): "
+              f"{ours.pipeline_ms_per_image:.1f} ms per image, focal given")
     if peer_missing:
         print(f"peer not run: {peer_missing}")
     print(f"({time.perf_counter() - start:.0f} s; companion eval --yud {args.yud} "

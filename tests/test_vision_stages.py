@@ -5,7 +5,15 @@ import pytest
 
 from companion.vision.corners import CornerParams, find_corners, integrity, table1_mask
 from companion.vision.geometry import angle_between_directions_deg, direction_of, to_pixels
-from companion.vision.vanishing import NONE, V1, V2, V3, assign_segments, detect_layout_vps
+from companion.vision.vanishing import (
+    NONE,
+    V1,
+    V2,
+    V3,
+    VPParams,
+    assign_segments,
+    detect_layout_vps,
+)
 
 W, H, F = 640, 480, 320.0
 C = np.array([(W - 1) / 2, (H - 1) / 2])
@@ -58,6 +66,32 @@ def test_lmvp_is_the_better_supported_horizontal_vp():
     more = _toward(v2, np.random.default_rng(3).uniform([0, 0], [W, H], (40, 2)), 120)
     layout = detect_layout_vps(np.vstack([segs, more]), W, H, F)
     assert to_pixels(layout.vps[V1]) == pytest.approx(v2, rel=0.01)
+
+
+def test_with_a_known_focal_length_v2_must_be_nearly_orthogonal_to_v1():
+    rng = np.random.default_rng(4)
+    segs, v1, v2 = _room_segments(rng)
+    # A third horizontal family, better supported than V2, 14° off orthogonal to V1
+    # (level camera: azimuth a images at x = cx + F tan a).
+    a1 = np.degrees(np.arctan2(v1[0] - C[0], F))
+    off = np.array([C[0] + F * np.tan(np.radians(a1 - 90.0 + 14.0)), C[1]])
+    distractor = _toward(off, rng.uniform([0, 0], [W, H], (30, 2)), 100)
+    segs = np.vstack([segs, distractor])
+    loose = VPParams(orthogonal_tol_deg=20.0)
+    tight = VPParams(orthogonal_tol_deg=VPParams().known_focal_orthogonal_tol_deg)
+
+    def horizontal_layout(params):
+        layout = detect_layout_vps(segs, W, H, F, params)
+        return direction_of(layout.vps[[V1, V2]], F, C)
+
+    def holds(dirs, target_px):
+        target = direction_of(np.append(target_px, 1.0), F, C)
+        return angle_between_directions_deg(dirs, target).min() < 1.0
+
+    assert holds(horizontal_layout(loose), off)  # 14° passes the guessed-focal tolerance
+    tight_layout = horizontal_layout(tight)
+    assert holds(tight_layout, v1) and holds(tight_layout, v2)
+    assert not holds(tight_layout, off)
 
 
 def test_layout_without_segments_is_not_found_and_finite():

@@ -101,16 +101,16 @@ def vp_consistency(segments: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np
     """
     s = np.asarray(segments, dtype=float).reshape(-1, 4)
     v = np.asarray(vp, dtype=float)
-    m = segment_midpoints(s)
-    to_vp = v[None, :2] - v[2] * m
-    u = s[:, 2:4] - s[:, 0:2]
-    lu = np.linalg.norm(u, axis=1)
-    lv = np.linalg.norm(to_vp, axis=1)
-    denom = lu * lv
-    ok = denom > 1e-12
-    sin = np.ones(len(s))
-    sin[ok] = np.abs(u[ok, 0] * to_vp[ok, 1] - u[ok, 1] * to_vp[ok, 0]) / denom[ok]
-    sin = np.clip(sin, 0.0, 1.0)
+    # Written out on columns: this runs many times per frame on small arrays, where
+    # each numpy call's overhead costs more than its arithmetic.
+    ux, uy = s[:, 2] - s[:, 0], s[:, 3] - s[:, 1]
+    tx = v[0] - v[2] * 0.5 * (s[:, 0] + s[:, 2])
+    ty = v[1] - v[2] * 0.5 * (s[:, 1] + s[:, 3])
+    lu = np.hypot(ux, uy)
+    denom = lu * np.hypot(tx, ty)
+    sin = np.abs(ux * ty - uy * tx) / np.maximum(denom, 1e-300)
+    sin[denom <= 1e-12] = 1.0
+    np.minimum(sin, 1.0, out=sin)
     return np.degrees(np.arcsin(sin)), sin * lu / 2.0
 
 

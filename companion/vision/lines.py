@@ -35,6 +35,10 @@ def _edlines(min_length_px: float) -> Detector:
     ed = cv2.ximgproc.createEdgeDrawing()
     params = cv2.ximgproc.EdgeDrawing.Params()
     params.MinLineLength = max(int(round(min_length_px)), 5)
+    # No a-contrario (NFA) validation of the fitted lines: on the YUD train photographs it
+    # cost about 4 ms of 12 per image and bought 0.7 points of AA@3°; the chance segments
+    # it removes are short, and filter_segments keeps only the longest ones anyway.
+    params.NFAValidation = False
     ed.setParams(params)
 
     def detect(gray: np.ndarray) -> np.ndarray:

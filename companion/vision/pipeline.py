@@ -92,11 +92,13 @@ class Pipeline:
         ``given``: configured. Otherwise self-calibration: V1 and V2 found with the
         assumed focal length (half the width, then the width) are orthogonal in space, so
         when both are finite they fix ``f`` (:func:`focal_from_orthogonal_vps`); the VPs
-        are then found again with it (``estimated``). Else ``assumed``.
+        are then found again with it (``estimated``). Else ``assumed``. With a given
+        focal length V1 ⟂ V2 is checked with the tighter ``known_focal_orthogonal_tol_deg``.
         """
         vp = self.config.vision.vanishing
+        known = replace(vp, orthogonal_tol_deg=vp.known_focal_orthogonal_tol_deg)
         if self.config.camera.focal_px:
-            return detect_layout_vps(segments, w, h, self.config.camera.focal_px, vp), "given"
+            return detect_layout_vps(segments, w, h, self.config.camera.focal_px, known), "given"
         centre = principal_point(w, h)
         first = None
         for guess in (w / 2.0, float(w)):
@@ -109,6 +111,19 @@ class Pipeline:
                 return detect_layout_vps(segments, w, h, f, vp), "estimated"
         return first, "assumed"
 
+    def segments(self, frame: np.ndarray) -> np.ndarray:
+        """Stage 1: the frame's line segments (N×4 pixels), filtered and capped."""
+        vc = self.config.vision
+        h, w = frame.shape[:2]
+        min_len = vc.min_segment_frac * float(np.hypot(w, h))
+        return filter_segments(self._detector(min_len)(to_gray(frame)), min_len, vc.max_segments)
+
+    def layout(self, frame: np.ndarray) -> tuple[LayoutVPs, str]:
+        """Stages 1–2 alone, frame → layout VPs and the focal length's source (given,
+        estimated, assumed): what a vanishing-point detector returns."""
+        h, w = frame.shape[:2]
+        return self._layout(self.segments(frame), w, h)
+
     def __call__(self, frame: np.ndarray) -> Estimate:
         """Run every stage on a BGR or grey ``frame`` (H×W[×3] uint8)."""
         vc = self.config.vision
@@ -119,9 +134,7 @@ class Pipeline:
         ms: dict[str, float] = {}
 
         t0 = time.perf_counter()
-        min_len = vc.min_segment_frac * float(np.hypot(w, h))
-        raw = self._detector(min_len)(to_gray(frame))
-        segments = filter_segments(raw, min_len, vc.max_segments)
+        segments = self.segments(frame)
         t1 = time.perf_counter()
         ms["lines"] = (t1 - t0) * 1e3
 

@@ -63,7 +63,8 @@ class VPParams:
     histogram_sigma_deg: float = 1.0
     peak_min_share: float = 0.04  # a horizontal peak holds >= this share of horizontal length
     max_horizontal_vps: int = 6
-    orthogonal_tol_deg: float = 20.0  # V1 ⟂ V2 within this (the focal length is a guess)
+    orthogonal_tol_deg: float = 20.0  # V1 ⟂ V2 within this when the focal length is a guess
+    known_focal_orthogonal_tol_deg: float = 10.0  # ... and when it is given
     min_vp_separation_deg: float = 3.0  # peaks closer than this are one VP
 
 
@@ -117,6 +118,25 @@ def _msac_weights(norm_segs, lengths, vp, focal, p: VPParams) -> np.ndarray:
     return np.where(ok, lengths * (1.0 - r**2), 0.0)
 
 
+def _refine_weights(norm_segs, vp, focal, p: VPParams) -> np.ndarray:
+    """Weights that make :func:`_refine`'s algebraic residual ``l·v`` an endpoint residual.
+
+    A segment of length ``L`` whose midpoint ``m`` is seen from ``v = (x, y, w)`` along
+    ``t = (x, y) − w·m`` strays from the line to ``v`` by ``|l·v| · (L/2) / |t|`` at its
+    ends, so weighting ``(l·v)²`` by ``(L/|t|)²`` minimises the endpoint residuals (the
+    quantity the inlier test bounds), times the MSAC weight ``1 − r²`` of each inlier.
+    Unweighted, segments near a finite VP dominate and distant ones barely count.
+    """
+    s = norm_segs
+    angle, residual = vp_consistency(s, vp)
+    r = residual * focal / p.residual_px
+    ok = (angle <= p.max_angle_deg) & (r <= 1.0)
+    v = vp / np.linalg.norm(vp)
+    t = np.hypot(v[0] - v[2] * 0.5 * (s[:, 0] + s[:, 2]), v[1] - v[2] * 0.5 * (s[:, 1] + s[:, 3]))
+    ln = np.hypot(s[:, 2] - s[:, 0], s[:, 3] - s[:, 1])
+    return np.where(ok, (1.0 - r**2) * (ln / np.maximum(t, 1e-12)) ** 2, 0.0)
+
+
 def _refine(lines: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
     """Least-squares VP of weighted lines: the unit v minimising Σ w (l·v)²."""
     if np.count_nonzero(weights > 0) < 2:
@@ -143,27 +163,35 @@ def _vertical_vp(ns, lines, lengths, focal, p: VPParams):
     # far outside the frame. Converging floor lines must not pass for verticals.
     min_cos = np.cos(np.radians(p.vertical_max_camera_tilt_deg))
     hyps = hyps[np.abs(hyps[:, 1]) >= min_cos]
-    # Score every hypothesis against every candidate at once (H × C).
+    # Score every hypothesis against every candidate at once (H × C). With midpoint m and
+    # direction u of a candidate and h = (x, y, w) a hypothesis, the direction from m to h
+    # is t = (x, y) − w·m; |u × t| and |t|² are both linear in products of h's entries,
+    # so each is one small matrix product instead of H × C × 2 temporaries.
     cs, cl = ns[cand], lengths[cand]
     mid = 0.5 * (cs[:, 0:2] + cs[:, 2:4])
-    u = cs[:, 2:4] - cs[:, 0:2]
-    to_vp = hyps[:, None, :2] - hyps[:, None, 2:3] * mid[None]
-    cross = np.abs(u[None, :, 0] * to_vp[..., 1] - u[None, :, 1] * to_vp[..., 0])
-    denom = np.linalg.norm(to_vp, axis=2) * cl[None]
-    sin = np.where(denom > 1e-15, cross / np.maximum(denom, 1e-15), 1.0)
-    r = sin * cl[None] / 2.0 * focal / p.residual_px
+    u = (cs[:, 2:4] - cs[:, 0:2]) / cl[:, None]
+    cross_rows = np.column_stack([-u[:, 1], u[:, 0], u[:, 1] * mid[:, 0] - u[:, 0] * mid[:, 1]])
+    cross = np.abs(hyps @ cross_rows.T)
+    h_sq = np.column_stack([hyps[:, 0] ** 2 + hyps[:, 1] ** 2, hyps[:, 0] * hyps[:, 2],
+                            hyps[:, 1] * hyps[:, 2], hyps[:, 2] ** 2])
+    m_sq = np.column_stack([np.ones(len(cs)), -2.0 * mid[:, 0], -2.0 * mid[:, 1],
+                            (mid**2).sum(axis=1)])
+    t_norm = np.sqrt(np.maximum(h_sq @ m_sq.T, 0.0))
+    sin = np.where(t_norm > 1e-15, cross / np.maximum(t_norm, 1e-15), 1.0)
+    r = sin * (cl * (focal / (2.0 * p.residual_px)))[None]
     ok = (r <= 1.0) & (sin <= np.sin(np.radians(p.max_angle_deg)))
     scores = np.where(ok, cl[None] * (1.0 - r**2), 0.0).sum(axis=1)
     best = hyps[int(np.argmax(scores))]
+    not_cand = np.ones(len(ns), bool)
+    not_cand[cand] = False
     for _ in range(2):
-        w = _msac_weights(ns, lengths, best, focal, p)
-        w[np.setdiff1d(np.arange(len(ns)), cand)] = 0.0
+        w = _refine_weights(ns, best, focal, p)
+        w[not_cand] = 0.0
         refined = _refine(lines, w)
         if refined is None:
             break
         best = refined
-    inl = _inliers(ns, best, focal, p)
-    inl[np.setdiff1d(np.arange(len(ns)), cand)] = False
+    inl = _inliers(ns, best, focal, p) & ~not_cand
     tilted = abs(best[1]) / np.linalg.norm(best) < min_cos
     if np.count_nonzero(inl) < 2 or tilted:
         return default, np.zeros(len(ns), bool), False
@@ -249,7 +277,7 @@ def detect_layout_vps(
     for peak in _histogram_peaks(theta[use], lengths[use], p):
         vp = _direction_at(peak, v3)
         for _ in range(2):
-            w = _msac_weights(ns, lengths, vp, focal_px, p) * rest
+            w = _refine_weights(ns, vp, focal_px, p) * rest
             refined = _refine(lines, w)
             if refined is None:
                 break
