@@ -123,14 +123,18 @@ def find_corners(
     min_sin = np.sin(np.radians(p.min_leg_angle_deg))
     ends = s.reshape(-1, 2, 2)
 
-    # 1. L_s, L_n: non-vertical segments whose endpoints meet (O×O, min over 2×2 ends).
+    # 1. L_s, L_n: non-vertical segments whose endpoints meet. The squared distance of
+    # the nearer of each pair's 2×2 ends, as four O×O arrays (this O² step must stay a few
+    # whole-array operations; a reduction over a reshaped O×2×O×2 array costs far more).
     oe = ends[others]
-    # Squared distances, upper triangle only: this O² step is the stage's main cost.
-    i, j = np.triu_indices(len(others), k=1)
-    diff = oe[i][:, :, None, :] - oe[j][:, None, :, :]
-    near = (np.einsum("pabk,pabk->pab", diff, diff).reshape(len(i), 4).min(axis=1)
-            <= p.radius_px ** 2)
-    i, j = i[near], j[near]
+    d2 = None
+    for a in (0, 1):
+        for b in (0, 1):
+            dx = oe[:, a, 0][:, None] - oe[:, b, 0][None, :]
+            dy = oe[:, a, 1][:, None] - oe[:, b, 1][None, :]
+            d = dx * dx + dy * dy
+            d2 = d if d2 is None else np.minimum(d2, d, out=d2)
+    i, j = np.nonzero(np.triu(d2 <= p.radius_px**2, k=1))
     si, ni = others[i], others[j]
     apart = _sin_between(dirs[si], dirs[ni]) >= min_sin
     si, ni = si[apart], ni[apart]
@@ -180,7 +184,9 @@ def _sin_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _end_distance(seg_ends: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Distance from each point to the nearer endpoint of its segment (…×2×2, …×2)."""
-    return np.linalg.norm(seg_ends - points[..., None, :], axis=-1).min(axis=-1)
+    near = np.hypot(seg_ends[..., 0, 0] - points[..., 0], seg_ends[..., 0, 1] - points[..., 1])
+    far = np.hypot(seg_ends[..., 1, 0] - points[..., 0], seg_ends[..., 1, 1] - points[..., 1])
+    return np.minimum(near, far)
 
 
 def table1_mask(corners: Corners, labels: np.ndarray, strict_labels: np.ndarray) -> np.ndarray:

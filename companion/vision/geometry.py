@@ -74,8 +74,12 @@ def intersect(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     Parallel lines meet at a point at infinity (``w = 0``); the result is scaled to unit
     norm so that far and infinite points stay well conditioned.
     """
-    p = np.cross(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
-    n = np.linalg.norm(p, axis=-1, keepdims=True)
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    # Written out: np.cross and np.linalg.norm cost more than this arithmetic on small arrays.
+    p = np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                  a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                  a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+    n = np.sqrt((p * p).sum(axis=-1, keepdims=True))
     return np.divide(p, n, out=np.zeros_like(p), where=n > 0)
 
 

@@ -354,14 +354,18 @@ def _vertical_chains(s, verticals, p: ObstacleParams, radius_px, leg_gap_frac):
     collinear = shorter_from_longer <= p.collinear_px
     np.fill_diagonal(collinear, True)
     # One chain per distinct set of collinear members, grown from its first segment.
-    _, first = np.unique(collinear, axis=0, return_index=True)
     singles = collinear.sum(axis=1) == 1
-    for iv in np.sort(first):
+    seen: set[bytes] = set()
+    for iv in range(len(verticals)):
         if singles[iv]:  # most vertical segments: the chain is the segment itself
             if lengths[iv] >= 2 * p.min_edge_px:
                 v = verticals[iv]
                 chains.append((s[v, :2].copy(), s[v, 2:].copy(), float(lengths[iv])))
             continue
+        members_key = collinear[iv].tobytes()
+        if members_key in seen:
+            continue
+        seen.add(members_key)
         others = np.flatnonzero(collinear[iv])
         local = np.concatenate([[iv], others[others != iv]])
         members = verticals[local]
@@ -402,21 +406,21 @@ def _edge_legs(s, verticals, free_idx, ends, p: ObstacleParams, radius_px, leg_g
     dist2 = np.einsum("cfek,cfek->cfe", diff, diff)
     near_end = np.argmin(dist2, axis=2)  # which end of the leg is at the chain end
     near = dist2.min(axis=2) <= radius_px ** 2
-    min_sin = np.sin(np.radians(20.0))
+    # Each leg leaves its chain end along ``away`` (its far end minus its near end); it
+    # counts when it is long enough and at least 20° off the edge, on either side.
+    span = free_ends[:, 1] - free_ends[:, 0]
+    leg_len = np.hypot(span[:, 0], span[:, 1])
+    axes = np.array([(b - a) / length for a, b, length in chains]).repeat(2, axis=0)
+    side = np.where(near_end == 0, 1.0, -1.0) * (
+        axes[:, 0, None] * span[None, :, 1] - axes[:, 1, None] * span[None, :, 0]
+    ) / np.maximum(leg_len, 1e-12)[None]
+    keep = near & (leg_len >= p.min_edge_px)[None] & (np.abs(side) >= np.sin(np.radians(20.0)))
+    legs: list[list] = [[] for _ in range(len(axes))]
+    for e, k in zip(*np.nonzero(keep), strict=True):
+        legs[e].append((int(free_idx[k]), np.sign(side[e, k])))
     for c, (end_a, end_b, length) in enumerate(chains):
-        axis = (end_b - end_a) / length
-        both = []
-        for e in (2 * c, 2 * c + 1):
-            ks = np.flatnonzero(near[e])
-            j = near_end[e, ks]
-            away = free_ends[ks, 1 - j] - free_ends[ks, j]
-            norm = np.linalg.norm(away, axis=1)
-            cross = (axis[0] * away[:, 1] - axis[1] * away[:, 0]) / np.maximum(norm, 1e-12)
-            keep = (norm >= p.min_edge_px) & (np.abs(cross) >= min_sin)
-            both.append([(int(free_idx[k]), np.sign(x))
-                         for k, x in zip(ks[keep], cross[keep], strict=True)])
-        if both[0] or both[1]:
-            out.append((end_a, end_b, length, both[0], both[1]))
+        if legs[2 * c] or legs[2 * c + 1]:
+            out.append((end_a, end_b, length, legs[2 * c], legs[2 * c + 1]))
     return out
 
 
