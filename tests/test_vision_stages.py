@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from companion.vision.corners import CornerParams, find_corners, integrity, table1_mask
+from companion.vision.corners import (
+    CornerParams,
+    _meeting_pairs,
+    find_corners,
+    integrity,
+    table1_mask,
+)
 from companion.vision.geometry import angle_between_directions_deg, direction_of, to_pixels
 from companion.vision.vanishing import (
     NONE,
@@ -118,6 +124,19 @@ def test_converging_floor_lines_are_not_taken_for_verticals():
     v3 = layout.vps[V3]
     far = to_pixels(v3) is None or np.linalg.norm(to_pixels(v3) - C) > F
     assert far
+
+
+def test_meeting_pairs_are_exactly_the_pairs_with_ends_within_the_radius():
+    rng = np.random.default_rng(5)
+    ends = rng.uniform(0, 200, (120, 2, 2))
+    ends[7] = ends[3] + 2.0  # ends exactly 2√2 apart, and a segment meeting itself is no pair
+    ends[9, 1] = ends[9, 0]
+    r = 6.0
+    d = np.linalg.norm(ends[:, None, :, None, :] - ends[None, :, None, :, :], axis=-1)
+    want = [(i, j) for i in range(120) for j in range(i + 1, 120) if d[i, j].min() <= r]
+    i, j = _meeting_pairs(ends, r)
+    assert list(zip(i.tolist(), j.tolist(), strict=True)) == want
+    assert (3, 7) in want and len(want) > 20
 
 
 def test_integrity_is_zero_when_legs_end_at_the_corner():

@@ -123,18 +123,8 @@ def find_corners(
     min_sin = np.sin(np.radians(p.min_leg_angle_deg))
     ends = s.reshape(-1, 2, 2)
 
-    # 1. L_s, L_n: non-vertical segments whose endpoints meet. The squared distance of
-    # the nearer of each pair's 2×2 ends, as four O×O arrays (this O² step must stay a few
-    # whole-array operations; a reduction over a reshaped O×2×O×2 array costs far more).
-    oe = ends[others]
-    d2 = None
-    for a in (0, 1):
-        for b in (0, 1):
-            dx = oe[:, a, 0][:, None] - oe[:, b, 0][None, :]
-            dy = oe[:, a, 1][:, None] - oe[:, b, 1][None, :]
-            d = dx * dx + dy * dy
-            d2 = d if d2 is None else np.minimum(d2, d, out=d2)
-    i, j = np.nonzero(np.triu(d2 <= p.radius_px**2, k=1))
+    # 1. L_s, L_n: non-vertical segments whose endpoints meet.
+    i, j = _meeting_pairs(ends[others], p.radius_px)
     si, ni = others[i], others[j]
     apart = _sin_between(dirs[si], dirs[ni]) >= min_sin
     si, ni = si[apart], ni[apart]
@@ -175,6 +165,29 @@ def find_corners(
     lam_c = lam_lp + integrity(pc, mids[legs[:, 2:]], lengths[legs[:, 2:]])
     order = np.argsort(lam_c, kind="stable")[: p.top_k]
     return Corners(pc[order], si[order], ni[order], ri[order], lam_lp[order], lam_c[order])
+
+
+def _meeting_pairs(seg_ends: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs ``i < j`` of segments (S×2×2 ends) with an end of each within ``radius_px``.
+
+    A sweep along x: after sorting the 2·S endpoints by x only those less than
+    ``radius_px`` apart in x are compared, so the cost grows with the number of close
+    pairs, not with S². Pairs come out sorted by (i, j).
+    """
+    pts = seg_ends.reshape(-1, 2)
+    order = np.argsort(pts[:, 0], kind="stable")
+    xs = pts[order, 0]
+    stop = np.searchsorted(xs, xs + radius_px, side="right")
+    counts = stop - np.arange(len(xs)) - 1
+    a = np.repeat(np.arange(len(xs)), counts)
+    b = a + 1 + np.arange(len(a)) - np.repeat(np.cumsum(counts) - counts, counts)
+    a, b = order[a], order[b]
+    d = pts[a] - pts[b]
+    close = d[:, 0] ** 2 + d[:, 1] ** 2 <= radius_px**2
+    sa, sb = a[close] // 2, b[close] // 2
+    lo, hi = np.minimum(sa, sb), np.maximum(sa, sb)
+    key = np.unique((lo * len(seg_ends) + hi)[lo != hi])
+    return key // len(seg_ends), key % len(seg_ends)
 
 
 def _sin_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

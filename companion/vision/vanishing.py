@@ -211,17 +211,18 @@ def _horizon_basis(v3: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, e2
 
 
-def _azimuths(lines: np.ndarray, v3: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Azimuth θ ∈ [0°, 180°) of the horizon point of each line; validity mask."""
-    e1, e2 = _horizon_basis(v3)
+def _azimuths(lines: np.ndarray, v3: np.ndarray, basis) -> tuple[np.ndarray, np.ndarray]:
+    """Azimuth θ ∈ [0°, 180°) of the horizon point of each line; validity mask.
+    ``basis`` is :func:`_horizon_basis` of ``v3``."""
+    e1, e2 = basis
     pts = np.cross(lines, v3)
     ok = np.linalg.norm(pts, axis=1) > 1e-9
     theta = np.degrees(np.arctan2(pts @ e1, pts @ e2)) % 180.0
     return theta, ok
 
 
-def _direction_at(theta_deg: float, v3: np.ndarray) -> np.ndarray:
-    e1, e2 = _horizon_basis(v3)
+def _direction_at(theta_deg: float, basis) -> np.ndarray:
+    e1, e2 = basis
     t = np.radians(theta_deg)
     return np.sin(t) * e1 + np.cos(t) * e2
 
@@ -271,11 +272,12 @@ def detect_layout_vps(
 
     # Horizontal VP candidates from the horizon histogram, refined and merged.
     rest = ~v3_inl
-    theta, valid = _azimuths(lines, v3)
+    basis = _horizon_basis(v3)
+    theta, valid = _azimuths(lines, v3, basis)
     use = rest & valid
     cands: list[tuple[np.ndarray, float]] = []
     for peak in _histogram_peaks(theta[use], lengths[use], p):
-        vp = _direction_at(peak, v3)
+        vp = _direction_at(peak, basis)
         for _ in range(2):
             w = _refine_weights(ns, vp, focal_px, p) * rest
             refined = _refine(lines, w)
@@ -297,7 +299,7 @@ def detect_layout_vps(
 
     layout, others = _choose_layout(cands, v3, p)
     if layout is None:
-        v1, v2 = _direction_at(90.0, v3), _direction_at(0.0, v3)
+        v1, v2 = _direction_at(90.0, basis), _direction_at(0.0, basis)
         obs, sup = (False, False), (0.0, 0.0)
     else:
         (v1, s1), (v2, s2), v2_seen = layout
