@@ -100,16 +100,17 @@ def vp_consistency(segments: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np
     residual is how far, in pixels, the segment's endpoints stray from the line joining
     its midpoint to ``v`` (``sin(angle) · length / 2``).
 
-    Returns ``(angle_deg, residual_px)``, each of shape (N,). A segment whose midpoint
-    coincides with ``v`` gets 90° (it carries no evidence for ``v``).
+    Returns ``(angle_deg, residual_px)``, each of shape (N,), or (K, N) for K×3 ``vp``
+    (K points at once). A segment whose midpoint coincides with ``v`` gets 90° (it
+    carries no evidence for ``v``).
     """
     s = np.asarray(segments, dtype=float).reshape(-1, 4)
     v = np.asarray(vp, dtype=float)
     # Written out on columns: this runs many times per frame on small arrays, where
     # each numpy call's overhead costs more than its arithmetic.
     ux, uy = s[:, 2] - s[:, 0], s[:, 3] - s[:, 1]
-    tx = v[0] - v[2] * 0.5 * (s[:, 0] + s[:, 2])
-    ty = v[1] - v[2] * 0.5 * (s[:, 1] + s[:, 3])
+    tx = v[..., 0, None] - v[..., 2, None] * (0.5 * (s[:, 0] + s[:, 2]))
+    ty = v[..., 1, None] - v[..., 2, None] * (0.5 * (s[:, 1] + s[:, 3]))
     lu = np.hypot(ux, uy)
     denom = lu * np.hypot(tx, ty)
     sin = np.abs(ux * ty - uy * tx) / np.maximum(denom, 1e-300)

@@ -85,16 +85,17 @@ def _collinearity_px(seg: np.ndarray, line: np.ndarray, others: np.ndarray,
     return np.maximum(from_seg_line, from_other_lines)
 
 
-def _horizon_error_deg(d, d3) -> float:
-    """How far an OVP direction is from horizontal (⟂ the vertical V3), degrees."""
-    return float(abs(90.0 - angle_between_directions_deg(d, d3)))
+def _horizon_error_deg(d, d3):
+    """How far OVP direction(s) ``d`` (…×3) are from horizontal (⟂ the vertical V3), degrees."""
+    return np.abs(90.0 - angle_between_directions_deg(d, d3))
 
 
-def _ovp_error_deg(d1, d2, d3) -> tuple[float, float]:
-    """λ3 (eq. 8) parts: how far O1, O2 are from horizontal, and from orthogonal."""
-    horizon = max(_horizon_error_deg(d1, d3), _horizon_error_deg(d2, d3))
-    ortho = abs(90.0 - angle_between_directions_deg(d1, d2))
-    return float(horizon), float(ortho)
+def _ovp_error_deg(d1, d2, d3):
+    """λ3 (eq. 8) parts: how far O1, O2 are from horizontal, and from orthogonal
+    (directions …×3, so many candidate pairs are checked at once)."""
+    horizon = np.maximum(_horizon_error_deg(d1, d3), _horizon_error_deg(d2, d3))
+    ortho = np.abs(90.0 - angle_between_directions_deg(d1, d2))
+    return horizon, ortho
 
 
 def _far_end(g: int, corners: Corners, segments, lines, verticals, p: ObstacleParams):
@@ -140,10 +141,41 @@ def _partner_legs(cand, lines, ends, vline, pc, e, edge, reach_px, radius_px) ->
     return cand[ok]
 
 
-def _off_layout(dirs, layout_dirs, p: ObstacleParams) -> bool:
-    """Every OVP direction in ``dirs`` at least ``non_manhattan_min_deg`` from V1 and V2."""
-    sep = angle_between_directions_deg(np.vstack(dirs)[:, None, :], layout_dirs[None])
-    return bool(sep.min() >= p.non_manhattan_min_deg)
+def _off_layout(dirs, layout_dirs, p: ObstacleParams) -> np.ndarray:
+    """For each OVP direction in ``dirs`` (…×3): at least ``non_manhattan_min_deg`` from
+    V1 and V2 (``layout_dirs`` 2×3)."""
+    sep = angle_between_directions_deg(np.asarray(dirs)[..., None, :], layout_dirs)
+    return sep.min(axis=-1) >= p.non_manhattan_min_deg
+
+
+def _partner_ovps(legs_g, partners, lines, horizon, d3, layout_dirs, f, c, p: ObstacleParams):
+    """The best OVPs of corner C_g's legs paired with the legs of its partner C_h.
+
+    Every combination at once: O1 = one leg of C_g × a partner leg ``h``; O2 = the other
+    leg × a second partner leg ``h2``, or × the horizon when C_h shows only one leg.
+    Two real partner legs beat one; then the smaller λ3 (eq. 8), first found on ties.
+    Returns (d1, d2, λ3) or None.
+    """
+    combos = [(h, a, h2) for h in partners for a in (0, 1)
+              for h2 in (-1, *partners) if h2 != h]
+    if not combos:
+        return None
+    h, a, h2 = np.array(combos).T
+    legs_g = np.asarray(legs_g)
+    o1 = intersect(lines[legs_g[a]], lines[h])
+    o2 = intersect(lines[legs_g[1 - a]], np.where((h2 < 0)[:, None], horizon, lines[h2]))
+    d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
+    hor, ortho = _ovp_error_deg(d1, d2, d3)
+    ok = (np.any(o1, axis=1) & np.any(o2, axis=1) & (hor <= p.horizon_tol_deg)
+          & (ortho <= p.orthogonal_tol_deg) & _off_layout(d1, layout_dirs, p)
+          & _off_layout(d2, layout_dirs, p))
+    if not ok.any():
+        return None
+    two_legs = ok & (h2 >= 0)
+    pick = np.flatnonzero(two_legs if two_legs.any() else ok)
+    lam3 = np.maximum(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
+    k = pick[np.argmin(lam3[pick])]
+    return d1[k], d2[k], float(lam3[k])
 
 
 def find_obstacles(
@@ -205,28 +237,7 @@ def find_obstacles(
             radius_px,
         )
         legs_g = (corners.s[g], corners.n[g])
-        best = None
-        for h in partners:
-            for a, b in ((0, 1), (1, 0)):
-                o1 = intersect(lines[legs_g[a]], lines[h])
-                # O2 from the second leg of C_h if there is one, else from the horizon.
-                for h2 in [None, *partners]:
-                    if h2 == h:
-                        continue
-                    o2 = intersect(lines[legs_g[b]], horizon if h2 is None else lines[h2])
-                    if not (np.any(o1) and np.any(o2)):
-                        continue
-                    d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
-                    hor, ortho = _ovp_error_deg(d1, d2, d3)
-                    if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg:
-                        continue
-                    if not _off_layout((d1, d2), layout_dirs, p):
-                        continue
-                    lam3 = max(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
-                    # Two real partner legs beat one; then the smaller λ3.
-                    key = (h2 is None, lam3)
-                    if best is None or key < best[0]:
-                        best = (key, d1, d2, lam3)
+        best = _partner_ovps(legs_g, partners, lines, horizon, d3, layout_dirs, f, c, p)
         if best is None and edge >= 2 * p.min_edge_px:
             # C_h has no visible leg at all: both OVPs from C_g's legs on the horizon.
             # Weaker evidence (the horizon test is then true by construction), so the
@@ -236,11 +247,11 @@ def find_obstacles(
                 d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
                 _, ortho = _ovp_error_deg(d1, d2, d3)
                 if (ortho <= p.single_corner_orthogonal_tol_deg
-                        and _off_layout((d1, d2), layout_dirs, p)):
-                    best = ((True, ortho), d1, d2, ortho)
+                        and _off_layout(np.stack([d1, d2]), layout_dirs, p).all()):
+                    best = d1, d2, float(ortho)
         if best is None:
             continue
-        _, d1, d2, lam3 = best
+        d1, d2, lam3 = best
         found.append((d1, d2, lam3, edge, (g,), (), np.empty((0, 2))))
 
     # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
@@ -266,16 +277,17 @@ def _group_by_ovps(found, merge_deg: float) -> list[list[int]]:
             i = parent[i]
         return i
 
-    for i in range(len(found)):
-        for j in range(i + 1, len(found)):
-            a1, a2 = found[i][0], found[i][1]
-            b1, b2 = found[j][0], found[j][1]
-            same = min(
-                max(angle_between_directions_deg(a1, b1), angle_between_directions_deg(a2, b2)),
-                max(angle_between_directions_deg(a1, b2), angle_between_directions_deg(a2, b1)),
-            )
-            if same <= merge_deg:
-                parent[root(i)] = root(j)
+    if len(found) > 1:
+        a1, a2 = np.array([x[0] for x in found]), np.array([x[1] for x in found])
+        i, j = np.triu_indices(len(found), k=1)
+        same = np.minimum(
+            np.maximum(angle_between_directions_deg(a1[i], a1[j]),
+                       angle_between_directions_deg(a2[i], a2[j])),
+            np.maximum(angle_between_directions_deg(a1[i], a2[j]),
+                       angle_between_directions_deg(a2[i], a1[j])),
+        )
+        for k in np.flatnonzero(same <= merge_deg):
+            parent[root(int(i[k]))] = root(int(j[k]))
     groups: dict[int, list[int]] = {}
     for i in range(len(found)):
         groups.setdefault(root(i), []).append(i)
@@ -310,15 +322,13 @@ def _obstacle(members, found, segments, corners: Corners, layout: LayoutVPs, p) 
     o3 = layout.vps[V3]
     # Further Table-I corners whose legs point at O1 and O2 join the obstacle (λ3).
     joined = list(paired)
-    for k in range(len(corners)):
-        if k in paired or len(paired) == 0:
-            continue
-        a_s, _ = vp_consistency(segments[[corners.s[k]]], o1)
-        a_n, _ = vp_consistency(segments[[corners.n[k]]], o2)
-        b_s, _ = vp_consistency(segments[[corners.s[k]]], o2)
-        b_n, _ = vp_consistency(segments[[corners.n[k]]], o1)
-        if min(max(a_s[0], a_n[0]), max(b_s[0], b_n[0])) <= p.member_angle_deg:
-            joined.append(k)
+    if paired:
+        angles = [vp_consistency(segments[legs_k], o)[0]
+                  for legs_k in (corners.s, corners.n) for o in (o1, o2)]
+        a_s, b_s, b_n, a_n = angles  # s→O1, s→O2, n→O1, n→O2
+        fits = np.minimum(np.maximum(a_s, a_n), np.maximum(b_s, b_n)) <= p.member_angle_deg
+        fits[paired] = False
+        joined += np.flatnonzero(fits).tolist()
     return Obstacle(
         ovps=np.vstack([o1, o2, o3]),
         corners_px=_unique_points(np.vstack([corners.points_px[joined], extra_points])),
@@ -433,20 +443,17 @@ def _silhouette_halves(edges, lines, d3, layout_dirs, f, c, p: ObstacleParams):
     OVP (eqs. 6–8 with one leg per corner), which must lie on the horizon and away from
     V1 and V2. Returns a list of (direction, edge length, legs, corner points).
     """
-    halves = []
-    for end_a, end_b, length, legs_a, legs_b in edges:
-        for ka, sa in legs_a:
-            for kb, sb in legs_b:
-                if sa != sb:
-                    continue
-                o = intersect(lines[ka], lines[kb])
-                if not np.any(o):
-                    continue
-                d = direction_of(o, f, c)
-                if _horizon_error_deg(d, d3) <= p.horizon_tol_deg and _off_layout(
-                        [d], layout_dirs, p):
-                    halves.append((d, length, (ka, kb), np.vstack([end_a, end_b])))
-    return halves
+    combos = [(e, ka, kb) for e, (_, _, _, legs_a, legs_b) in enumerate(edges)
+              for ka, sa in legs_a for kb, sb in legs_b if sa == sb]
+    if not combos:
+        return []
+    e, ka, kb = np.array(combos).T
+    o = intersect(lines[ka], lines[kb])
+    d = direction_of(o, f, c)
+    ok = (np.any(o, axis=1) & (_horizon_error_deg(d, d3) <= p.horizon_tol_deg)
+          & _off_layout(d, layout_dirs, p))
+    return [(d[k], edges[e[k]][2], (int(ka[k]), int(kb[k])),
+             np.vstack([edges[e[k]][0], edges[e[k]][1]])) for k in np.flatnonzero(ok)]
 
 
 def _edge_horizon_pairs(edges, lines, horizon, d3, layout_dirs, f, c, p: ObstacleParams):
@@ -458,40 +465,38 @@ def _edge_horizon_pairs(edges, lines, horizon, d3, layout_dirs, f, c, p: Obstacl
     separates a box from chance, as for a single corner. One leg must be at each end:
     two legs at one end may be a rug's corner touching a door frame.
     """
+    combos = [(e, ka, kb) for e, (_, _, length, legs_a, legs_b) in enumerate(edges)
+              if length >= 2 * p.min_edge_px for ka, _ in legs_a for kb, _ in legs_b if ka != kb]
+    if not combos:
+        return []
+    e, ka, kb = np.array(combos).T
+    oa, ob = intersect(lines[ka], horizon), intersect(lines[kb], horizon)
+    da, db = direction_of(oa, f, c), direction_of(ob, f, c)
+    _, ortho = _ovp_error_deg(da, db, d3)
+    ok = (np.any(oa, axis=1) & np.any(ob, axis=1)
+          & (ortho <= p.single_corner_orthogonal_tol_deg)
+          & _off_layout(da, layout_dirs, p) & _off_layout(db, layout_dirs, p))
     found = []
-    for end_a, end_b, length, legs_a, legs_b in edges:
-        if length < 2 * p.min_edge_px or not (legs_a and legs_b):
-            continue
-        best = None
-        for ka, _ in legs_a:
-            for kb, _ in legs_b:
-                if ka == kb:
-                    continue
-                o = intersect(lines[[ka, kb]], horizon[None, :])
-                if not np.all(np.any(o != 0, axis=1)):
-                    continue
-                da, db = direction_of(o, f, c)
-                _, ortho = _ovp_error_deg(da, db, d3)
-                if (ortho <= p.single_corner_orthogonal_tol_deg
-                        and _off_layout((da, db), layout_dirs, p)
-                        and (best is None or ortho < best[0])):
-                    best = (ortho, da, db, ka, kb)
-        if best is not None:
-            ortho, da, db, ka, kb = best
-            found.append((da, db, ortho, length, (), (ka, kb), np.vstack([end_a, end_b])))
+    for edge in np.unique(e[ok]):  # per edge, its most orthogonal pair (first on ties)
+        idx = np.flatnonzero(ok & (e == edge))
+        k = idx[np.argmin(ortho[idx])]
+        end_a, end_b, length, _, _ = edges[edge]
+        found.append((da[k], db[k], float(ortho[k]), length, (), (int(ka[k]), int(kb[k])),
+                      np.vstack([end_a, end_b])))
     return found
 
 
 def _pair_halves(halves, d3, p: ObstacleParams) -> list[tuple]:
     """Two silhouette OVPs at a right angle (λ3, eq. 8) make an obstacle hypothesis."""
+    if len(halves) < 2:
+        return []
+    dirs = np.array([h[0] for h in halves])
+    i, j = np.triu_indices(len(halves), k=1)
+    hor, ortho = _ovp_error_deg(dirs[i], dirs[j], d3)
+    lam3 = np.maximum(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
     found = []
-    for i in range(len(halves)):
-        for j in range(i + 1, len(halves)):
-            (d1, len1, legs1, pts1), (d2, len2, legs2, pts2) = halves[i], halves[j]
-            hor, ortho = _ovp_error_deg(d1, d2, d3)
-            if ortho > p.orthogonal_tol_deg:
-                continue
-            lam3 = max(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
-            found.append((d1, d2, lam3, max(len1, len2), (), legs1 + legs2,
-                          np.vstack([pts1, pts2])))
+    for k in np.flatnonzero(ortho <= p.orthogonal_tol_deg):
+        (d1, len1, legs1, pts1), (d2, len2, legs2, pts2) = halves[i[k]], halves[j[k]]
+        found.append((d1, d2, float(lam3[k]), max(len1, len2), (), legs1 + legs2,
+                      np.vstack([pts1, pts2])))
     return found

@@ -131,19 +131,25 @@ def _refine_weights(norm_segs, vp, focal, p: VPParams) -> np.ndarray:
     angle, residual = vp_consistency(s, vp)
     r = residual * focal / p.residual_px
     ok = (angle <= p.max_angle_deg) & (r <= 1.0)
-    v = vp / np.linalg.norm(vp)
-    t = np.hypot(v[0] - v[2] * 0.5 * (s[:, 0] + s[:, 2]), v[1] - v[2] * 0.5 * (s[:, 1] + s[:, 3]))
+    v = vp / np.linalg.norm(vp, axis=-1, keepdims=True)
+    t = np.hypot(v[..., 0, None] - v[..., 2, None] * (0.5 * (s[:, 0] + s[:, 2])),
+                 v[..., 1, None] - v[..., 2, None] * (0.5 * (s[:, 1] + s[:, 3])))
     ln = np.hypot(s[:, 2] - s[:, 0], s[:, 3] - s[:, 1])
     return np.where(ok, (1.0 - r**2) * (ln / np.maximum(t, 1e-12)) ** 2, 0.0)
 
 
 def _refine(lines: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
     """Least-squares VP of weighted lines: the unit v minimising Σ w (l·v)²."""
-    if np.count_nonzero(weights > 0) < 2:
-        return None
-    a = (lines * weights[:, None]).T @ lines
+    vps, ok = _refine_many(lines, weights[None])
+    return vps[0] if ok[0] else None
+
+
+def _refine_many(lines: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_refine` for K weightings (K×N) at once: K×3 VPs, and K flags saying
+    whether at least two lines carried weight (else that row is meaningless)."""
+    a = np.matmul((weights[:, :, None] * lines[None]).transpose(0, 2, 1), lines)
     _, vecs = np.linalg.eigh(a)
-    return vecs[:, 0]
+    return vecs[:, :, 0], np.count_nonzero(weights > 0, axis=1) >= 2
 
 
 def _vertical_vp(ns, lines, lengths, focal, p: VPParams):
@@ -276,15 +282,14 @@ def detect_layout_vps(
     theta, valid = _azimuths(lines, v3, basis)
     use = rest & valid
     cands: list[tuple[np.ndarray, float]] = []
-    for peak in _histogram_peaks(theta[use], lengths[use], p):
-        vp = _direction_at(peak, basis)
-        for _ in range(2):
-            w = _refine_weights(ns, vp, focal_px, p) * rest
-            refined = _refine(lines, w)
-            if refined is None:
-                break
-            vp = refined
-        support = float((_msac_weights(ns, lengths, vp, focal_px, p) * rest).sum())
+    # Every histogram peak refined at once (K×N weights), then taken in order of height.
+    peak_vps = np.array([_direction_at(pk, basis) for pk in
+                         _histogram_peaks(theta[use], lengths[use], p)]).reshape(-1, 3)
+    for _ in range(2):
+        refined, ok = _refine_many(lines, _refine_weights(ns, peak_vps, focal_px, p) * rest)
+        peak_vps = np.where(ok[:, None], refined, peak_vps)
+    supports = (_msac_weights(ns, lengths, peak_vps, focal_px, p) * rest).sum(axis=1)
+    for vp, support in zip(peak_vps, supports.tolist(), strict=True):
         if support <= 0:
             continue
         vp = vp if vp[2] >= 0 else -vp
@@ -357,12 +362,8 @@ def assign_segments(segments: np.ndarray, vps: np.ndarray, params: VPParams | No
     s = np.asarray(segments, dtype=float).reshape(-1, 4)
     if len(s) == 0:
         return np.empty(0, int), np.empty(0)
-    angles = np.empty((len(vps), len(s)))
-    ok = np.empty((len(vps), len(s)), bool)
-    for k, v in enumerate(vps):
-        a, r = vp_consistency(s, v)
-        angles[k] = a
-        ok[k] = (a <= p.max_angle_deg) & (r <= p.residual_px)
+    angles, residuals = vp_consistency(s, np.asarray(vps, dtype=float).reshape(-1, 3))
+    ok = (angles <= p.max_angle_deg) & (residuals <= p.residual_px)
     masked = np.where(ok, angles, np.inf)
     best = np.argmin(masked, axis=0)
     labels = np.where(np.isfinite(masked[best, np.arange(len(s))]), best, NONE)
