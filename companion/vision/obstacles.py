@@ -74,17 +74,6 @@ class Obstacle:
     lambda3_deg: float
 
 
-def _collinearity_px(seg: np.ndarray, line: np.ndarray, others: np.ndarray,
-                     other_lines: np.ndarray) -> np.ndarray:
-    """λ1 (eq. 6) of one segment against each of ``others``: the largest distance of
-    either segment's endpoints from the other's line (lines as :func:`segment_lines`)."""
-    ends = others.reshape(-1, 2, 2)
-    from_seg_line = np.abs(ends @ line[:2] + line[2]).max(axis=1)
-    pts = seg.reshape(2, 2)
-    from_other_lines = np.abs(pts @ other_lines[:, :2].T + other_lines[:, 2]).max(axis=0)
-    return np.maximum(from_seg_line, from_other_lines)
-
-
 def _horizon_error_deg(d, d3):
     """How far OVP direction(s) ``d`` (…×3) are from horizontal (⟂ the vertical V3), degrees."""
     return np.abs(90.0 - angle_between_directions_deg(d, d3))
@@ -98,47 +87,64 @@ def _ovp_error_deg(d1, d2, d3):
     return horizon, ortho
 
 
-def _far_end(g: int, corners: Corners, segments, lines, verticals, p: ObstacleParams):
-    """The other end of corner g's vertical edge, following collinear V3 segments.
+def _far_ends(corners: Corners, segments, lines, verticals, p: ObstacleParams):
+    """The other end of each corner's vertical edge, following collinear V3 segments.
 
-    Returns (point, edge length) or None. Segments on the line of ``L_r^g`` (λ1, eq. 6)
-    count; the far end is the endpoint farthest from ``p_c`` on the side of the leg's
-    midpoint (λ2 → π, eq. 7: the partner lies the other way from its own leg).
+    A V3 segment is on the edge of ``L_r^g`` when λ1 (eq. 6), the largest distance of
+    either segment's endpoints from the other's line, is within ``collinear_px``. The
+    far end is the endpoint farthest from ``p_c`` on the side of the leg's midpoint
+    (λ2 → π, eq. 7: the partner lies the other way from its own leg).
+    Returns (far ends K×2, edge lengths K, usable K bool): all corners at once.
     """
-    pc = corners.points_px[g]
-    rg = segments[corners.r[g]]
-    u = 0.5 * (rg[:2] + rg[2:]) - pc
-    if np.linalg.norm(u) < 1e-9:
-        return None
-    u /= np.linalg.norm(u)
-    r = corners.r[g]
-    on_edge = verticals[(verticals == r) | (_collinearity_px(
-        rg, lines[r], segments[verticals], lines[verticals]) <= p.collinear_px)]
-    if len(on_edge) == 0:
-        return None
-    reach = float(((segments[on_edge].reshape(-1, 2) - pc) @ u).max())
-    if reach < p.min_edge_px:
-        return None
-    return pc + reach * u, reach
+    pc = corners.points_px
+    rg = segments[corners.r]
+    u = 0.5 * (rg[:, :2] + rg[:, 2:]) - pc
+    norm = np.hypot(u[:, 0], u[:, 1])
+    ok = norm >= 1e-9
+    u = u / np.where(ok, norm, 1.0)[:, None]
+    vends = segments[verticals].reshape(-1, 2, 2)[None]  # 1×V×2×2
+    rl, vl = lines[corners.r][:, None, None, :], lines[verticals][None, :, None, :]
+    rends = rg.reshape(-1, 2, 2)[:, None]  # K×1×2×2
+    lam1 = np.maximum(
+        np.abs(vends[..., 0] * rl[..., 0] + vends[..., 1] * rl[..., 1] + rl[..., 2]).max(axis=2),
+        np.abs(rends[..., 0] * vl[..., 0] + rends[..., 1] * vl[..., 1] + vl[..., 2]).max(axis=2),
+    )
+    on_edge = (verticals[None] == corners.r[:, None]) | (lam1 <= p.collinear_px)
+    along = ((vends[..., 0] - pc[:, None, None, 0]) * u[:, None, None, 0]
+             + (vends[..., 1] - pc[:, None, None, 1]) * u[:, None, None, 1]).max(axis=2)
+    reach = np.where(on_edge, along, -np.inf).max(axis=1, initial=-np.inf)
+    ok &= reach >= p.min_edge_px
+    return pc + np.where(ok, reach, 0.0)[:, None] * u, reach, ok
 
 
-def _partner_legs(cand, lines, ends, vline, pc, e, edge, reach_px, radius_px) -> np.ndarray:
-    """Segments among ``cand`` that end on the vertical line near its far end ``e``.
+def _partner_legs(corners: Corners, g, far, edge, free_idx, lines, ends, radius_px,
+                  leg_gap_frac) -> np.ndarray:
+    """Which free segments are legs of C_h at the far end of each corner ``g``'s edge.
 
-    A leg's line must cross ``vline`` within ``reach_px`` of ``e``, on the far half of
-    the edge from ``pc``, and the leg must end within ``radius_px`` of that crossing.
+    A leg's line must cross the vertical line within ``radius_px + leg_gap_frac · edge``
+    of the far end, on the far half of the edge from ``p_c``, and the leg must end within
+    ``radius_px`` of that crossing; C_g's own legs are not C_h's. Returns G×F bool over
+    ``free_idx``.
     """
-    if len(cand) == 0:
-        return cand
-    q_h = intersect(lines[cand], vline)
-    w = q_h[:, 2]
+    pc, e = corners.points_px[g], far
+    vline = np.column_stack([pc[:, 1] - e[:, 1], e[:, 0] - pc[:, 0],
+                             pc[:, 0] * e[:, 1] - pc[:, 1] * e[:, 0]])
+    vline /= np.hypot(vline[:, 0], vline[:, 1])[:, None]
+    q_h = intersect(lines[free_idx][None], vline[:, None])
+    w = q_h[..., 2]
     ok = np.abs(w) >= 1e-12
-    q = np.divide(q_h[:, :2], w[:, None], out=np.zeros((len(cand), 2)), where=ok[:, None])
-    axis = (e - pc) / edge
-    ok &= np.linalg.norm(q - e, axis=1) <= reach_px
-    ok &= (q - pc) @ axis >= edge * 0.5
-    ok &= np.linalg.norm(ends[cand] - q[:, None, :], axis=2).min(axis=1) <= radius_px
-    return cand[ok]
+    q = q_h[..., :2] / np.where(ok, w, 1.0)[..., None]
+    axis = (e - pc) / edge[:, None]
+    ok &= (np.hypot(q[..., 0] - e[:, None, 0], q[..., 1] - e[:, None, 1])
+           <= (radius_px + leg_gap_frac * edge)[:, None])
+    ok &= ((q[..., 0] - pc[:, None, 0]) * axis[:, None, 0]
+           + (q[..., 1] - pc[:, None, 1]) * axis[:, None, 1]) >= 0.5 * edge[:, None]
+    fe = ends[free_idx][None]  # 1×F×2×2
+    end_gap = np.minimum(np.hypot(fe[..., 0, 0] - q[..., 0], fe[..., 0, 1] - q[..., 1]),
+                         np.hypot(fe[..., 1, 0] - q[..., 0], fe[..., 1, 1] - q[..., 1]))
+    ok &= end_gap <= radius_px
+    ok &= (free_idx[None] != corners.s[g][:, None]) & (free_idx[None] != corners.n[g][:, None])
+    return ok
 
 
 def _off_layout(dirs, layout_dirs, p: ObstacleParams) -> np.ndarray:
@@ -148,34 +154,32 @@ def _off_layout(dirs, layout_dirs, p: ObstacleParams) -> np.ndarray:
     return sep.min(axis=-1) >= p.non_manhattan_min_deg
 
 
-def _partner_ovps(legs_g, partners, lines, horizon, d3, layout_dirs, f, c, p: ObstacleParams):
-    """The best OVPs of corner C_g's legs paired with the legs of its partner C_h.
+def _partner_ovps(legs, partners, lines, horizon, d3, layout_dirs, f, c, p: ObstacleParams):
+    """The best OVPs of each corner C_g's legs paired with the legs of its partner C_h.
 
-    Every combination at once: O1 = one leg of C_g × a partner leg ``h``; O2 = the other
-    leg × a second partner leg ``h2``, or × the horizon when C_h shows only one leg.
-    Two real partner legs beat one; then the smaller λ3 (eq. 8), first found on ties.
-    Returns (d1, d2, λ3) or None.
+    ``legs`` G×2 (L_s, L_n of each C_g); ``partners`` G lists of C_h's legs. Every
+    combination of every corner at once: O1 = one leg of C_g × a partner leg ``h``; O2 =
+    the other leg × a second partner leg ``h2``, or × the horizon when C_h shows only one
+    leg. Two real partner legs beat one; then the smaller λ3 (eq. 8), first found on ties.
+    Returns {corner row: (d1, d2, λ3)} for the corners with a consistent partner.
     """
-    combos = [(h, a, h2) for h in partners for a in (0, 1)
-              for h2 in (-1, *partners) if h2 != h]
+    combos = [(gi, h, a, h2) for gi, hs in enumerate(partners) for h in hs for a in (0, 1)
+              for h2 in (-1, *hs) if h2 != h]
     if not combos:
-        return None
-    h, a, h2 = np.array(combos).T
-    legs_g = np.asarray(legs_g)
-    o1 = intersect(lines[legs_g[a]], lines[h])
-    o2 = intersect(lines[legs_g[1 - a]], np.where((h2 < 0)[:, None], horizon, lines[h2]))
+        return {}
+    gi, h, a, h2 = np.array(combos).T
+    o1 = intersect(lines[legs[gi, a]], lines[h])
+    o2 = intersect(lines[legs[gi, 1 - a]], np.where((h2 < 0)[:, None], horizon, lines[h2]))
     d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
     hor, ortho = _ovp_error_deg(d1, d2, d3)
     ok = (np.any(o1, axis=1) & np.any(o2, axis=1) & (hor <= p.horizon_tol_deg)
           & (ortho <= p.orthogonal_tol_deg) & _off_layout(d1, layout_dirs, p)
           & _off_layout(d2, layout_dirs, p))
-    if not ok.any():
-        return None
-    two_legs = ok & (h2 >= 0)
-    pick = np.flatnonzero(two_legs if two_legs.any() else ok)
     lam3 = np.maximum(hor, ortho * p.horizon_tol_deg / p.orthogonal_tol_deg)
-    k = pick[np.argmin(lam3[pick])]
-    return d1[k], d2[k], float(lam3[k])
+    rows = np.flatnonzero(ok)
+    rows = rows[np.lexsort((rows, lam3[rows], h2[rows] < 0, gi[rows]))]
+    _, first = np.unique(gi[rows], return_index=True)
+    return {int(gi[k]): (d1[k], d2[k], float(lam3[k])) for k in rows[first]}
 
 
 def find_obstacles(
@@ -216,43 +220,31 @@ def find_obstacles(
 
     # (d1, d2, λ3, edge length, corner indices, extra leg segments, extra corner points)
     found: list[tuple] = []
-    for g in range(len(corners)):
-        far = _far_end(g, corners, s, lines, verticals, p)
-        if far is None:
-            continue
-        e, edge = far
-        pc = corners.points_px[g]
-        # Legs of C_h: free segments that meet the vertical line near e and end there.
-        vline = np.cross(np.append(pc, 1.0), np.append(e, 1.0))
-        vline /= np.hypot(vline[0], vline[1])
-        partners = _partner_legs(
-            free_idx[~np.isin(free_idx, (corners.s[g], corners.n[g]))],
-            lines,
-            ends,
-            vline,
-            pc,
-            e,
-            edge,
-            radius_px + leg_gap_frac * edge,
-            radius_px,
-        )
-        legs_g = (corners.s[g], corners.n[g])
-        best = _partner_ovps(legs_g, partners, lines, horizon, d3, layout_dirs, f, c, p)
-        if best is None and edge >= 2 * p.min_edge_px:
-            # C_h has no visible leg at all: both OVPs from C_g's legs on the horizon.
-            # Weaker evidence (the horizon test is then true by construction), so the
-            # orthogonality gate is tighter.
-            o1, o2 = (intersect(lines[leg], horizon) for leg in legs_g)
-            if np.any(o1) and np.any(o2):
-                d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
-                _, ortho = _ovp_error_deg(d1, d2, d3)
-                if (ortho <= p.single_corner_orthogonal_tol_deg
-                        and _off_layout(np.stack([d1, d2]), layout_dirs, p).all()):
-                    best = d1, d2, float(ortho)
-        if best is None:
-            continue
-        d1, d2, lam3 = best
-        found.append((d1, d2, lam3, edge, (g,), (), np.empty((0, 2))))
+    if len(corners) and len(verticals):
+        far, edge, usable = _far_ends(corners, s, lines, verticals, p)
+        g = np.flatnonzero(usable)
+        is_leg = _partner_legs(corners, g, far[g], edge[g], free_idx, lines, ends, radius_px,
+                               leg_gap_frac)
+        legs = np.column_stack([corners.s[g], corners.n[g]])
+        best = _partner_ovps(legs, [free_idx[row] for row in is_leg], lines, horizon, d3,
+                             layout_dirs, f, c, p)
+        # C_h has no visible leg at all: both OVPs from C_g's legs on the horizon. Weaker
+        # evidence (the horizon test is then true by construction), so the orthogonality
+        # gate is tighter.
+        alone = np.array([k for k in range(len(g)) if k not in best
+                          and edge[g[k]] >= 2 * p.min_edge_px], dtype=int)
+        o1 = intersect(lines[legs[alone, 0]], horizon)
+        o2 = intersect(lines[legs[alone, 1]], horizon)
+        d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
+        _, ortho = _ovp_error_deg(d1, d2, d3)
+        lone_ok = (np.any(o1, axis=1) & np.any(o2, axis=1)
+                   & (ortho <= p.single_corner_orthogonal_tol_deg)
+                   & _off_layout(d1, layout_dirs, p) & _off_layout(d2, layout_dirs, p))
+        for k in np.flatnonzero(lone_ok):
+            best[int(alone[k])] = (d1[k], d2[k], float(ortho[k]))
+        for k in sorted(best):
+            d1k, d2k, lam3 = best[k]
+            found.append((d1k, d2k, lam3, float(edge[g[k]]), (int(g[k]),), (), np.empty((0, 2))))
 
     # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
     edges = _edge_legs(s, verticals, free_idx, ends, p, radius_px, leg_gap_frac)
