@@ -22,6 +22,7 @@ __all__ = [
     "vp_consistency",
     "to_pixels",
     "direction_of",
+    "endpoint_weights",
     "point_of",
     "horizon_line",
     "angle_between_directions_deg",
@@ -117,6 +118,23 @@ def vp_consistency(segments: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np
     sin[denom <= 1e-12] = 1.0
     np.minimum(sin, 1.0, out=sin)
     return np.degrees(np.arcsin(sin)), sin * lu / 2.0
+
+
+def endpoint_weights(segments: np.ndarray, vp: np.ndarray) -> np.ndarray:
+    """Weights turning the algebraic residual ``l·v`` of a VP fit into endpoint residuals.
+
+    A segment of length ``L`` whose midpoint ``m`` sees ``v = (x, y, w)`` (unit norm)
+    along ``t = (x, y) − w·m`` strays from the line to ``v`` by ``|l·v| · (L/2) / |t|`` at
+    its ends (``l`` as :func:`segment_lines`), so minimising ``Σ (L/|t|)² (l·v)²``
+    minimises the endpoint residuals: segments near a finite VP do not dominate and
+    distant ones still count. Shape (N,), or (K, N) for K×3 ``vp``.
+    """
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    v = np.asarray(vp, dtype=float)
+    v = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    t = np.hypot(v[..., 0, None] - v[..., 2, None] * (0.5 * (s[:, 0] + s[:, 2])),
+                 v[..., 1, None] - v[..., 2, None] * (0.5 * (s[:, 1] + s[:, 3])))
+    return (np.hypot(s[:, 2] - s[:, 0], s[:, 3] - s[:, 1]) / np.maximum(t, 1e-12)) ** 2
 
 
 def direction_of(point: np.ndarray, focal_px: float, centre: np.ndarray) -> np.ndarray:

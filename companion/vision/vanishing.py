@@ -30,6 +30,7 @@ import numpy as np
 
 from companion.vision.geometry import (
     angle_between_directions_deg,
+    endpoint_weights,
     point_of,
     segment_lengths,
     segment_lines,
@@ -119,23 +120,13 @@ def _msac_weights(norm_segs, lengths, vp, focal, p: VPParams) -> np.ndarray:
 
 
 def _refine_weights(norm_segs, vp, focal, p: VPParams) -> np.ndarray:
-    """Weights that make :func:`_refine`'s algebraic residual ``l·v`` an endpoint residual.
-
-    A segment of length ``L`` whose midpoint ``m`` is seen from ``v = (x, y, w)`` along
-    ``t = (x, y) − w·m`` strays from the line to ``v`` by ``|l·v| · (L/2) / |t|`` at its
-    ends, so weighting ``(l·v)²`` by ``(L/|t|)²`` minimises the endpoint residuals (the
-    quantity the inlier test bounds), times the MSAC weight ``1 − r²`` of each inlier.
-    Unweighted, segments near a finite VP dominate and distant ones barely count.
-    """
-    s = norm_segs
-    angle, residual = vp_consistency(s, vp)
+    """Weights of :func:`_refine`: the MSAC weight ``1 − r²`` of each inlier times
+    :func:`endpoint_weights`, so the fit minimises endpoint residuals (the quantity the
+    inlier test bounds), not the algebraic ``l·v``."""
+    angle, residual = vp_consistency(norm_segs, vp)
     r = residual * focal / p.residual_px
     ok = (angle <= p.max_angle_deg) & (r <= 1.0)
-    v = vp / np.linalg.norm(vp, axis=-1, keepdims=True)
-    t = np.hypot(v[..., 0, None] - v[..., 2, None] * (0.5 * (s[:, 0] + s[:, 2])),
-                 v[..., 1, None] - v[..., 2, None] * (0.5 * (s[:, 1] + s[:, 3])))
-    ln = np.hypot(s[:, 2] - s[:, 0], s[:, 3] - s[:, 1])
-    return np.where(ok, (1.0 - r**2) * (ln / np.maximum(t, 1e-12)) ** 2, 0.0)
+    return np.where(ok, (1.0 - r**2) * endpoint_weights(norm_segs, vp), 0.0)
 
 
 def _refine(lines: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
