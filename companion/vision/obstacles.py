@@ -29,6 +29,7 @@ from companion.vision.corners import Corners
 from companion.vision.geometry import (
     angle_between_directions_deg,
     direction_of,
+    endpoint_weights,
     horizon_line,
     intersect,
     point_of,
@@ -290,7 +291,6 @@ def _obstacle(members, found, segments, corners: Corners, layout: LayoutVPs, p) 
     """One obstacle from a group of pairs: OVPs refit on all legs, member corners joined."""
     f, c = layout.focal_px, layout.centre
     lines = segment_lines(segments)
-    lengths = segment_lengths(segments)
     ref1, ref2 = found[members[0]][0], found[members[0]][1]
     paired = sorted({k for m in members for k in found[m][4]})
     extra_legs = [k for m in members for k in found[m][5]]
@@ -304,9 +304,11 @@ def _obstacle(members, found, segments, corners: Corners, layout: LayoutVPs, p) 
         angle, _ = vp_consistency(segments[legs], ref_px)
         mine = legs[angle <= max(p.member_angle_deg * 3, 6.0)]
         if len(mine) >= 2:
-            w = lengths[mine]
-            a = (lines[mine] * w[:, None]).T @ lines[mine]
-            vp = np.linalg.eigh(a)[1][:, 0]
+            # Least squares on endpoint residuals, as for the layout VPs.
+            vp = ref_px
+            for _ in range(2):
+                w = endpoint_weights(segments[mine], vp)
+                vp = np.linalg.eigh((lines[mine] * w[:, None]).T @ lines[mine])[1][:, 0]
             fitted.append(vp if vp[2] >= 0 else -vp)
         else:
             fitted.append(ref_px)
