@@ -189,6 +189,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--no-focal", action="store_true",
                     help="do not give the focal length (measures self-calibration)")
     ap.add_argument("--no-sitl", action="store_true", help="skip the SITL latency run")
+    ap.add_argument("--latency-frames", type=int, default=200,
+                    help="frames fed to SITL at 10 Hz for frame → setpoint (default 200; "
+                         "samples are the frames whose yaw rate changed)")
     ap.add_argument("--port", type=int, default=14562, help="UDP port for the SITL run")
     ap.add_argument("--config", metavar="PATH", dest="bench_config", help="YAML config")
     ap.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
@@ -206,8 +209,8 @@ def _parse_resolution(text: str) -> tuple[int, int]:
 
 def bench(args: argparse.Namespace, config: Config | None = None) -> int:
     cfg = config or Config()
-    if args.frames < 1 or args.repeat < 1:
-        raise ValueError("--frames and --repeat must be at least 1")
+    if args.frames < 1 or args.repeat < 1 or args.latency_frames < 1:
+        raise ValueError("--frames, --repeat and --latency-frames must be at least 1")
     sizes = [_parse_resolution(r) for r in args.resolutions]
     figures: dict = {"resolutions": {}}
     ctx = multiprocessing.get_context("spawn")
@@ -225,7 +228,8 @@ def bench(args: argparse.Namespace, config: Config | None = None) -> int:
             figures["resolutions"][f"{w}x{h}"] = res
         if not args.no_sitl and (640, 480) in videos:
             video, focal = videos[(640, 480)]
-            lat = _setpoint_latency(video, focal, max(1, args.repeat // 2), cfg, args.port)
+            passes = -(-args.latency_frames // args.frames)  # ceil: whole passes over the video
+            lat = _setpoint_latency(video, focal, passes, cfg, args.port)
             figures["frame_to_setpoint_ms"] = _stats(lat) if lat else None
             figures["frame_to_setpoint_samples"] = len(lat)
     _print(figures, args)

@@ -227,6 +227,7 @@ def test_bench_prints_ratios_and_writes_the_json_keys(tmp_path):
 
 def test_bench_and_sim_reject_bad_arguments_in_one_line():
     _assert_one_line_error(run("bench", "--resolutions", "640by480", "--no-sitl"), "WxH")
+    _assert_one_line_error(run("bench", "--latency-frames", "0"), "--latency-frames")
     _assert_one_line_error(run("sim", "--eta0", "120"), "between -89 and 89")
 
 
