@@ -93,7 +93,7 @@ def _time_resolution(video: str, focal_px: float | None, repeat: int,
             if detector is None:
                 h, w = gray.shape
                 min_len = cfg.vision.min_segment_frac * float(np.hypot(w, h))
-                detector = make_detector(cfg.vision.detector, min_len)
+                detector = make_detector(cfg.vision.detector, min_len, cfg.vision.edge_threshold)
                 lsd = make_detector("lsd", min_len)
             t2 = time.perf_counter()
             detector(gray)

@@ -81,3 +81,17 @@ def test_renderer_truth_eta_follows_eq10():
     truth = render(scene, cam)[1]
     assert truth.obstacles[0].eta_deg == pytest.approx(20.0, abs=1e-6)
     assert truth.focal_px == pytest.approx(320.0)
+
+
+def test_a_lower_edge_threshold_finds_a_faint_edge():
+    # A rectangle 8 grey levels brighter than its background: below EDLines' default
+    # gradient threshold, above a lowered one.
+    frame = np.full((240, 320), 100, np.uint8)
+    frame[60:180, 80:240] = 108
+    default = Pipeline(Config()).segments(frame)
+    cfg = Config()
+    sensitive = Pipeline(replace(cfg, vision=replace(cfg.vision, edge_threshold=4.0)))
+    found = sensitive.segments(frame)
+    assert len(default) == 0
+    lengths = np.hypot(found[:, 2] - found[:, 0], found[:, 3] - found[:, 1])
+    assert np.count_nonzero(lengths > 100) >= 4  # the rectangle's four sides

@@ -79,7 +79,8 @@ class Pipeline:
     def _detector(self, min_len: float):
         key = round(min_len, 1)
         if key not in self._detectors:
-            self._detectors[key] = make_detector(self.config.vision.detector, min_len)
+            self._detectors[key] = make_detector(self.config.vision.detector, min_len,
+                                                 self.config.vision.edge_threshold)
         return self._detectors[key]
 
     def focal_for(self, width: int) -> float:
