@@ -23,7 +23,7 @@ from companion.vision.pipeline import Pipeline
 from companion.vision.vanishing import NONE, assign_segments
 
 __all__ = ["YudReport", "angular_errors_deg", "area_under_curve", "evaluate_yud",
-           "evaluate_yud_lu", "format_yud"]
+           "evaluate_yud_lu", "format_yud", "speed_side_by_side"]
 
 THRESHOLDS_DEG = (3.0, 5.0, 10.0)
 
@@ -200,6 +200,36 @@ def evaluate_yud_lu(folder: str | Path, split: str = "test", focal_given: bool =
         errors_deg=np.asarray(errors), ms_per_image=float(np.median(ms)) if ms else 0.0,
         focal_estimates_px=np.zeros(0), true_focal_px=yud.f_true,
         assign_precision=None, assign_recall=None, method="lu-vp-detect")
+
+
+def speed_side_by_side(folder: str | Path, split: str = "test", config: Config | None = None,
+                       limit: int | None = None) -> tuple[float, float]:
+    """Median ms per image of our layout VPs and of lu-vp-detect, focal length given,
+    timed in turns on each image (ours, the peer, ours, …; best of ``TIMING_RUNS`` each),
+    so that a machine whose speed drifts during the run slows both alike.
+
+    Raises :class:`sitl.peers.PeerUnavailable` when the peer is not installed.
+    """
+    from sitl.peers import lu_vp_detector
+
+    yud = _load(folder, split, limit)
+    cfg = config or Config()
+    pipeline = Pipeline(replace(cfg, camera=replace(cfg.camera, focal_px=yud.f_true)))
+    ours, theirs, peers = [], [], {}
+    for im in yud.images:
+        image = yud.read(im)
+        h, w = image.shape[:2]
+        peer = peers.setdefault((w, h), lu_vp_detector(yud.f_true, ((w - 1) / 2.0,
+                                                                    (h - 1) / 2.0)))
+        best = [float("inf"), float("inf")]
+        for _ in range(TIMING_RUNS):
+            for k, run in enumerate((pipeline.layout, peer)):
+                t0 = time.perf_counter()
+                run(image)
+                best[k] = min(best[k], (time.perf_counter() - t0) * 1e3)
+        ours.append(best[0])
+        theirs.append(best[1])
+    return float(np.median(ours)), float(np.median(theirs))
 
 
 def format_yud(reports: list[YudReport]) -> list[str]:

@@ -41,3 +41,13 @@ def test_three_train_images_find_their_manhattan_frame():
     assert figures["images"] == 3
     assert figures["median_err_deg"] < 2.0
     assert figures["assign_precision"] > 0.9
+
+
+@pytest.mark.skipif(not (YUD / "yud.json").is_file(),
+                    reason="the York Urban DB lives outside the repository (../shared/data)")
+def test_speed_side_by_side_times_both_methods_on_the_same_images():
+    pytest.importorskip("lu_vp_detect", reason="optional peer")
+    from sitl.yud import speed_side_by_side
+
+    mine, theirs = speed_side_by_side(YUD, "train", limit=2)
+    assert 0 < mine < 1000 and 0 < theirs < 10000
