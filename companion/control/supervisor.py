@@ -88,26 +88,26 @@ def yaw_rate_setpoint(decision: Decision | None, now_s: float, stale_after_s: fl
     (clamped to ``max_turn_deg``, Table II's cap) is complete; then 0. A decision older
     than ``stale_after_s`` gives 0 at once, so a stalled camera never leaves a turn flying.
     """
-    if decision is None:
+    if decision is None or now_s - decision.t_s > stale_after_s:
         return 0.0
-    age_s = now_s - decision.t_s
+    end_s = turn_ends_at(decision, policy)
+    if end_s is None or not now_s < end_s:  # no turn, or it is complete
+        return 0.0
     rate = decision.command.yaw_rate_deg_s
-    if age_s > stale_after_s or rate == 0.0 or not math.isfinite(rate):
-        return 0.0
-    rate = math.copysign(min(abs(rate), policy.max_yaw_rate_deg_s), rate)
-    turn_deg = min(abs(decision.command.turn_deg), policy.max_turn_deg)
-    return rate if age_s * abs(rate) < turn_deg else 0.0
+    return math.copysign(min(abs(rate), policy.max_yaw_rate_deg_s), rate)
 
 
 def turn_ends_at(decision: Decision | None, policy: PolicyConfig) -> float | None:
-    """When (monotonic s) :func:`yaw_rate_setpoint` drops the decision's rate to 0 because
-    its turn is complete; None if it asks for no turn. The shell ticks then, so the cap
-    holds to the millisecond rather than to the next setpoint tick."""
+    """When (monotonic s) the decision's turn, at its rate clamped to ``max_yaw_rate_deg_s``,
+    reaches its angle clamped to ``max_turn_deg`` (Table II's cap): from then
+    :func:`yaw_rate_setpoint` gives 0. None if it asks for no turn. The shell ticks then,
+    so the cap holds to the millisecond rather than to the next setpoint tick."""
     if decision is None:
         return None
-    rate = min(abs(decision.command.yaw_rate_deg_s), policy.max_yaw_rate_deg_s)
+    rate = decision.command.yaw_rate_deg_s
     if rate == 0.0 or not math.isfinite(rate):
         return None
+    rate = min(abs(rate), policy.max_yaw_rate_deg_s)
     return decision.t_s + min(abs(decision.command.turn_deg), policy.max_turn_deg) / rate
 
 
