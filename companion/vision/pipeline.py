@@ -97,8 +97,8 @@ class Pipeline:
         focal length V1 ⟂ V2 is checked with the tighter ``known_focal_orthogonal_tol_deg``.
         """
         vp = self.config.vision.vanishing
-        known = replace(vp, orthogonal_tol_deg=vp.known_focal_orthogonal_tol_deg)
         if self.config.camera.focal_px:
+            known = replace(vp, orthogonal_tol_deg=vp.known_focal_orthogonal_tol_deg)
             return detect_layout_vps(segments, w, h, self.config.camera.focal_px, known), "given"
         centre = principal_point(w, h)
         first = None

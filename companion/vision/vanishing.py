@@ -112,21 +112,25 @@ def _inliers(norm_segs: np.ndarray, vp: np.ndarray, focal: float, p: VPParams) -
     return (angle <= p.max_angle_deg) & (residual * focal <= p.residual_px)
 
 
-def _msac_weights(norm_segs, lengths, vp, focal, p: VPParams) -> np.ndarray:
+def _msac_score(norm_segs, vp, focal, p: VPParams) -> np.ndarray:
+    """MSAC's truncated quadratic ``1 − r²`` per segment (r: endpoint residual over
+    ``residual_px``); 0 for segments that fail the inlier test (angle or residual)."""
     angle, residual = vp_consistency(norm_segs, vp)
     r = residual * focal / p.residual_px
     ok = (angle <= p.max_angle_deg) & (r <= 1.0)
-    return np.where(ok, lengths * (1.0 - r**2), 0.0)
+    return np.where(ok, 1.0 - r**2, 0.0)
+
+
+def _msac_weights(norm_segs, lengths, vp, focal, p: VPParams) -> np.ndarray:
+    """Support of ``vp``: each inlier's length times its MSAC score."""
+    return lengths * _msac_score(norm_segs, vp, focal, p)
 
 
 def _refine_weights(norm_segs, vp, focal, p: VPParams) -> np.ndarray:
-    """Weights of :func:`_refine`: the MSAC weight ``1 − r²`` of each inlier times
+    """Weights of :func:`_refine`: the MSAC score of each inlier times
     :func:`endpoint_weights`, so the fit minimises endpoint residuals (the quantity the
     inlier test bounds), not the algebraic ``l·v``."""
-    angle, residual = vp_consistency(norm_segs, vp)
-    r = residual * focal / p.residual_px
-    ok = (angle <= p.max_angle_deg) & (r <= 1.0)
-    return np.where(ok, (1.0 - r**2) * endpoint_weights(norm_segs, vp), 0.0)
+    return _msac_score(norm_segs, vp, focal, p) * endpoint_weights(norm_segs, vp)
 
 
 def _refine(lines: np.ndarray, weights: np.ndarray) -> np.ndarray | None:
