@@ -155,6 +155,20 @@ def _off_layout(dirs, layout_dirs, p: ObstacleParams) -> np.ndarray:
     return sep.min(axis=-1) >= p.non_manhattan_min_deg
 
 
+def _horizon_ovps(leg_a, leg_b, lines, horizon, d3, layout_dirs, f, c, p: ObstacleParams):
+    """OVPs where two legs (index arrays) cross the horizon, for pairs whose other ends
+    show no leg: then the horizon test holds by construction, so only the tight
+    ``single_corner_orthogonal_tol_deg`` and the distance from V1, V2 separate a box
+    from chance. Returns (d1, d2, orthogonality error in degrees, passes)."""
+    o1, o2 = intersect(lines[leg_a], horizon), intersect(lines[leg_b], horizon)
+    d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
+    _, ortho = _ovp_error_deg(d1, d2, d3)
+    ok = (np.any(o1, axis=1) & np.any(o2, axis=1)
+          & (ortho <= p.single_corner_orthogonal_tol_deg)
+          & _off_layout(d1, layout_dirs, p) & _off_layout(d2, layout_dirs, p))
+    return d1, d2, ortho, ok
+
+
 def _partner_ovps(legs, partners, lines, horizon, d3, layout_dirs, f, c, p: ObstacleParams):
     """The best OVPs of each corner C_g's legs paired with the legs of its partner C_h.
 
@@ -229,18 +243,11 @@ def find_obstacles(
         legs = np.column_stack([corners.s[g], corners.n[g]])
         best = _partner_ovps(legs, [free_idx[row] for row in is_leg], lines, horizon, d3,
                              layout_dirs, f, c, p)
-        # C_h has no visible leg at all: both OVPs from C_g's legs on the horizon. Weaker
-        # evidence (the horizon test is then true by construction), so the orthogonality
-        # gate is tighter.
+        # C_h has no visible leg at all: both OVPs from C_g's legs on the horizon.
         alone = np.array([k for k in range(len(g)) if k not in best
                           and edge[g[k]] >= 2 * p.min_edge_px], dtype=int)
-        o1 = intersect(lines[legs[alone, 0]], horizon)
-        o2 = intersect(lines[legs[alone, 1]], horizon)
-        d1, d2 = direction_of(o1, f, c), direction_of(o2, f, c)
-        _, ortho = _ovp_error_deg(d1, d2, d3)
-        lone_ok = (np.any(o1, axis=1) & np.any(o2, axis=1)
-                   & (ortho <= p.single_corner_orthogonal_tol_deg)
-                   & _off_layout(d1, layout_dirs, p) & _off_layout(d2, layout_dirs, p))
+        d1, d2, ortho, lone_ok = _horizon_ovps(legs[alone, 0], legs[alone, 1], lines, horizon,
+                                               d3, layout_dirs, f, c, p)
         for k in np.flatnonzero(lone_ok):
             best[int(alone[k])] = (d1[k], d2[k], float(ortho[k]))
         for k in sorted(best):
@@ -464,12 +471,7 @@ def _edge_horizon_pairs(edges, lines, horizon, d3, layout_dirs, f, c, p: Obstacl
     if not combos:
         return []
     e, ka, kb = np.array(combos).T
-    oa, ob = intersect(lines[ka], horizon), intersect(lines[kb], horizon)
-    da, db = direction_of(oa, f, c), direction_of(ob, f, c)
-    _, ortho = _ovp_error_deg(da, db, d3)
-    ok = (np.any(oa, axis=1) & np.any(ob, axis=1)
-          & (ortho <= p.single_corner_orthogonal_tol_deg)
-          & _off_layout(da, layout_dirs, p) & _off_layout(db, layout_dirs, p))
+    da, db, ortho, ok = _horizon_ovps(ka, kb, lines, horizon, d3, layout_dirs, f, c, p)
     found = []
     for edge in np.unique(e[ok]):  # per edge, its most orthogonal pair (first on ties)
         idx = np.flatnonzero(ok & (e == edge))
