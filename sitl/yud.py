@@ -107,15 +107,18 @@ class _Yud:
 TIMING_RUNS = 3
 
 
+def _timed(run, *args):
+    """``run(*args)`` and its wall time in ms."""
+    t0 = time.perf_counter()
+    out = run(*args)
+    return out, (time.perf_counter() - t0) * 1e3
+
+
 def _best_of(run, *args):
     """``run(*args)``'s result and its shortest wall time in ms over ``TIMING_RUNS`` calls:
     the same rule for every method, so that a busy machine slows neither more."""
-    best, out = float("inf"), None
-    for _ in range(TIMING_RUNS):
-        t0 = time.perf_counter()
-        out = run(*args)
-        best = min(best, (time.perf_counter() - t0) * 1e3)
-    return out, best
+    runs = [_timed(run, *args) for _ in range(TIMING_RUNS)]
+    return runs[-1][0], min(ms for _, ms in runs)
 
 
 def _load(folder: str | Path, split: str, limit: int | None) -> _Yud:
@@ -221,14 +224,10 @@ def speed_side_by_side(folder: str | Path, split: str = "test", config: Config |
         h, w = image.shape[:2]
         peer = peers.setdefault((w, h), lu_vp_detector(yud.f_true, ((w - 1) / 2.0,
                                                                     (h - 1) / 2.0)))
-        best = [float("inf"), float("inf")]
-        for _ in range(TIMING_RUNS):
-            for k, run in enumerate((pipeline.layout, peer)):
-                t0 = time.perf_counter()
-                run(image)
-                best[k] = min(best[k], (time.perf_counter() - t0) * 1e3)
-        ours.append(best[0])
-        theirs.append(best[1])
+        turns = [(_timed(pipeline.layout, image)[1], _timed(peer, image)[1])
+                 for _ in range(TIMING_RUNS)]
+        ours.append(min(mine for mine, _ in turns))
+        theirs.append(min(peer_ms for _, peer_ms in turns))
     return float(np.median(ours)), float(np.median(theirs))
 
 
