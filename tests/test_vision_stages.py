@@ -253,3 +253,22 @@ def test_obstacle_from_two_leg_corners_of_its_outline():
     labels_m = assign_segments(segs_m, layout.vps)[0]
     assert find_obstacles(segs_m, corners.take(np.zeros(len(corners), bool)), layout,
                           ~np.isin(labels_m, (V1, V2, V3)), labels_m) == []
+
+
+def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
+    from companion.vision.corners import table1_labels
+    from companion.vision.vanishing import VPParams
+
+    vps = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])  # V1 at x-infinity
+    def leg(length, angle_deg):
+        a = np.radians(angle_deg)
+        return [100.0, 100.0, 100.0 + length * np.cos(a), 100.0 + length * np.sin(a)]
+    segs = np.array([leg(26, 3.0),    # short, 3° off V1: 0.7 px at its ends, noise
+                     leg(200, 3.0),   # long, 3° off V1: 5 px at its ends, a rotation
+                     leg(26, 8.0),    # short, 8° off V1: 1.8 px, a rotation
+                     leg(200, 1.0)])  # long, 1° off V1: tightly Manhattan
+    labels = table1_labels(segs, vps, VPParams(), CornerParams())
+    assert labels.tolist() == [V1, NONE, NONE, V1]
+    # With no noise allowance only the angle-and-residual rule is left.
+    strict = table1_labels(segs, vps, VPParams(), CornerParams(manhattan_leg_noise_px=0.0))
+    assert strict.tolist() == [NONE, NONE, NONE, V1]

@@ -18,7 +18,7 @@ in all segments.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,9 +29,9 @@ from companion.vision.geometry import (
     segment_lines,
     segment_midpoints,
 )
-from companion.vision.vanishing import V1, V2, V3
+from companion.vision.vanishing import V1, V2, V3, VPParams, assign_segments
 
-__all__ = ["CornerParams", "Corners", "find_corners", "integrity", "table1_mask"]
+__all__ = ["CornerParams", "Corners", "find_corners", "integrity", "table1_labels", "table1_mask"]
 
 
 @dataclass(frozen=True)
@@ -42,8 +42,10 @@ class CornerParams:
     min_leg_angle_deg: float = 12.0  # L_s and L_n at least this far apart in the image
     min_vertical_leg_angle_deg: float = 2.5  # L_r at least this far from L_s and L_n
     leg_gap_frac: float = 0.15  # the vertical leg may stop this share of its length short
+    leg_growth_px: float = 24.0  # legs grow up to this far along their edge to a junction
     manhattan_leg_deg: float = 1.5  # Table I: a leg is V1/V2 only if it points there this well
     manhattan_leg_residual_px: float = 2.0  # ... with endpoints at most this far off its line
+    manhattan_leg_noise_px: float = 1.0  # or whatever its angle, endpoints this close to it
     top_k: int = 100  # corners kept after ranking by Λ_C (paper: top 100)
 
 
@@ -202,18 +204,37 @@ def _end_distance(seg_ends: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.minimum(near, far)
 
 
+def table1_labels(segments: np.ndarray, vps: np.ndarray, vp_params: VPParams,
+                  params: CornerParams) -> np.ndarray:
+    """Segment labels for Table I: V1 or V2 only where a leg is Manhattan beyond doubt.
+
+    A leg is V1/V2 when it points at that VP within ``manhattan_leg_deg`` with endpoints
+    within ``manhattan_leg_residual_px`` of the line to it, or, whatever its angle, within
+    ``manhattan_leg_noise_px``: a short leg's direction is too noisy to show a small
+    rotation (1 px at the end of a 26 px leg is 4°), so a picture frame's short edges must
+    not pass for a rotated box's. Inputs: ``segments`` N×4 pixels, ``vps`` 3×3 layout VPs
+    (V1, V2, V3). Returns N labels as :func:`~companion.vision.vanishing.assign_segments`.
+    """
+    strict = replace(vp_params, max_angle_deg=params.manhattan_leg_deg,
+                     residual_px=params.manhattan_leg_residual_px)
+    labels, _ = assign_segments(segments, vps, strict)
+    within_noise = replace(vp_params, max_angle_deg=90.0, residual_px=params.manhattan_leg_noise_px)
+    near, _ = assign_segments(segments, np.asarray(vps)[[V1, V2]], within_noise)
+    return np.where(near >= 0, near, labels)
+
+
 def table1_mask(corners: Corners, labels: np.ndarray, strict_labels: np.ndarray) -> np.ndarray:
     """Paper Table I: the corners of a non-Manhattan obstacle standing on the floor.
 
     ``L_s`` and ``L_n`` belong to neither V1 nor V2 (nor V3): they are horizontal edges
     of a rotated object; ``L_r`` belongs to V3: a vertical edge.
 
-    ``labels`` are the ordinary segment labels; ``strict_labels`` the same assignment
-    with the tight ``manhattan_leg_*`` thresholds. Near the horizon every horizontal
-    line points within a few degrees of every horizontal VP, so an obstacle's edge often
-    passes the ordinary test for V1 too; a leg is ruled Manhattan only when it points at
-    V1 or V2 tightly. The OVP test of eq. 8 then rejects pairs whose legs were Manhattan
-    after all. Returns a K bool mask.
+    ``labels`` are the ordinary segment labels; ``strict_labels`` those of
+    :func:`table1_labels`, with the tight ``manhattan_leg_*`` thresholds. Near the horizon
+    every horizontal line points within a few degrees of every horizontal VP, so an
+    obstacle's edge often passes the ordinary test for V1 too; a leg is ruled Manhattan
+    only when it points at V1 or V2 tightly. The OVP test of eq. 8 then rejects pairs
+    whose legs were Manhattan after all. Returns a K bool mask.
     """
     labels = np.asarray(labels)
     strict = np.asarray(strict_labels)

@@ -42,6 +42,9 @@ from companion.vision.vanishing import V1, V2, V3, LayoutVPs
 __all__ = ["ObstacleParams", "Obstacle", "find_obstacles"]
 
 
+REFIT_SLACK_DEG = 2.0  # how much farther from horizontal or orthogonal a refit may be
+
+
 @dataclass(frozen=True)
 class ObstacleParams:
     """Thresholds of eqs. 6–8 and of obstacle grouping."""
@@ -321,6 +324,13 @@ def _obstacle(members, found, segments, corners: Corners, layout: LayoutVPs, p) 
             fitted.append(ref_px)
     o1, o2 = fitted
     o3 = layout.vps[V3]
+    # Legs that are nearly parallel in the image fix their OVP poorly: a refit that breaks
+    # the box model (λ3, eq. 8) is noise, not a better estimate, so keep the pair's OVPs.
+    d3 = direction_of(o3, f, c)
+    fit = _ovp_error_deg(direction_of(o1, f, c), direction_of(o2, f, c), d3)
+    ref = _ovp_error_deg(ref1, ref2, d3)
+    if any(a > b + REFIT_SLACK_DEG for a, b in zip(fit, ref, strict=True)):
+        o1, o2 = point_of(ref1, f, c), point_of(ref2, f, c)
     # Further Table-I corners whose legs point at O1 and O2 join the obstacle (λ3).
     joined = list(paired)
     if paired:

@@ -15,10 +15,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from companion.config import Config
-from companion.vision.corners import Corners, find_corners, table1_mask
+from companion.vision.corners import Corners, find_corners, table1_labels, table1_mask
 from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
-from companion.vision.lines import filter_segments, make_detector, to_gray
+from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
@@ -114,10 +114,13 @@ class Pipeline:
 
     def segments(self, frame: np.ndarray) -> np.ndarray:
         """Stage 1: the frame's line segments (N×4 pixels), filtered and capped."""
+        return self._segments(to_gray(frame))
+
+    def _segments(self, gray: np.ndarray) -> np.ndarray:
         vc = self.config.vision
-        h, w = frame.shape[:2]
+        h, w = gray.shape[:2]
         min_len = vc.min_segment_frac * float(np.hypot(w, h))
-        return filter_segments(self._detector(min_len)(to_gray(frame)), min_len, vc.max_segments)
+        return filter_segments(self._detector(min_len)(gray), min_len, vc.max_segments)
 
     def layout(self, frame: np.ndarray) -> tuple[LayoutVPs, str]:
         """Stages 1–2 alone, frame → layout VPs and the focal length's source (given,
@@ -135,7 +138,8 @@ class Pipeline:
         ms: dict[str, float] = {}
 
         t0 = time.perf_counter()
-        segments = self.segments(frame)
+        gray = to_gray(frame)
+        segments = self._segments(gray)
         t1 = time.perf_counter()
         ms["lines"] = (t1 - t0) * 1e3
 
@@ -144,13 +148,11 @@ class Pipeline:
         t2 = time.perf_counter()
         ms["vps"] = (t2 - t1) * 1e3
 
+        # Labels are judged on the detected segments; corners and pairs are built from the
+        # same segments grown to the junctions the detector stopped short of.
+        strict_labels = table1_labels(segments, layout.vps, vc.vanishing, vc.corners)
+        segments = extend_segments(gray, segments, max_px=vc.corners.leg_growth_px)
         corners = find_corners(segments, labels, vc.corners)
-        strict = replace(
-            vc.vanishing,
-            max_angle_deg=vc.corners.manhattan_leg_deg,
-            residual_px=vc.corners.manhattan_leg_residual_px,
-        )
-        strict_labels, _ = assign_segments(segments, layout.vps, strict)
         obstacle_corners = corners.take(table1_mask(corners, labels, strict_labels))
         free_legs = ~np.isin(strict_labels, (V1, V2)) & (labels != V3)
         t3 = time.perf_counter()

@@ -1,0 +1,70 @@
+"""Segment growing toward junctions (companion.vision.lines.extend_segments)."""
+
+import numpy as np
+import pytest
+
+from companion.vision.lines import extend_segments
+
+
+def _rectangle(noise=3.0, seed=0):
+    # A dark rectangle on a light background: its top edge runs along y = 59.5 from
+    # x = 79.5 to x = 239.5 (pixel 60 is the first dark row, 80 the first dark column).
+    rng = np.random.default_rng(seed)
+    frame = np.full((240, 320), 180.0)
+    frame[60:180, 80:240] = 60.0
+    frame += rng.normal(0.0, noise, frame.shape)
+    return np.clip(frame, 0, 255).astype(np.uint8)
+
+
+def test_a_segment_short_of_both_corners_grows_to_them():
+    seg = np.array([[100.0, 59.5, 220.0, 59.5]])
+    out = extend_segments(_rectangle(), seg, max_px=24.0, step_px=2.0)
+    assert out[0, 1] == pytest.approx(59.5) and out[0, 3] == pytest.approx(59.5)
+    assert out[0, 0] == pytest.approx(79.5, abs=2.5)
+    assert out[0, 2] == pytest.approx(239.5, abs=2.5)
+
+
+def test_growth_stops_at_the_corner_and_at_max_px():
+    at_corner = np.array([[80.0, 59.5, 239.0, 59.5]])
+    assert np.allclose(extend_segments(_rectangle(), at_corner), at_corner, atol=2.5)
+    far = np.array([[150.0, 59.5, 170.0, 59.5]])  # 70 px from either corner
+    out = extend_segments(_rectangle(), far, max_px=24.0, step_px=2.0)
+    assert out[0, 0] == pytest.approx(126.0) and out[0, 2] == pytest.approx(194.0)
+
+
+def test_the_step_must_keep_its_sign():
+    # The left half of the edge is dark-below, the right half dark-above: a segment on
+    # the left half must not grow into the right half.
+    frame = np.full((100, 200), 180, np.uint8)
+    frame[50:, :100] = 60
+    frame[:50, 100:] = 60
+    seg = np.array([[40.0, 49.5, 90.0, 49.5]])
+    out = extend_segments(frame, seg, max_px=30.0, step_px=2.0)
+    assert out[0, 2] <= 100.0
+
+
+def test_no_contrast_no_growth_and_shapes_kept():
+    flat = np.full((120, 160), 90, np.uint8)
+    segs = np.array([[20.0, 30.0, 60.0, 30.0], [50.0, 10.0, 50.0, 100.0]])
+    assert np.array_equal(extend_segments(flat, segs), segs)
+    assert extend_segments(flat, np.empty((0, 4))).shape == (0, 4)
+
+
+def test_a_vertical_side_grows_to_both_corners():
+    seg = np.array([[79.5, 70.0, 79.5, 170.0]])
+    out = extend_segments(_rectangle(), seg, max_px=30.0, step_px=2.0)
+    assert out[0, 1] == pytest.approx(59.5, abs=2.5)
+    assert out[0, 3] == pytest.approx(179.5, abs=2.5)
+
+
+def test_growth_stops_at_the_frame_border():
+    frame = _rectangle()
+    frame[60:180, 80:] = frame[60:180, 80:240].mean()  # the rectangle reaches the right border
+    seg = np.array([[260.0, 59.5, 300.0, 59.5]])
+    out = extend_segments(frame, seg, max_px=40.0, step_px=2.0)
+    assert 316.0 <= out[0, 2] <= 319.0
+
+
+def test_zero_growth_leaves_segments_alone():
+    seg = np.array([[100.0, 59.5, 220.0, 59.5]])
+    assert np.array_equal(extend_segments(_rectangle(), seg, max_px=0.0), seg)
