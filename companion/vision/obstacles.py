@@ -210,7 +210,9 @@ def find_obstacles(
     radius_px: float = 10.0,
     leg_gap_frac: float = 0.15,
 ) -> list[Obstacle]:
-    """Obstacles from Table-I corners, largest (tallest vertical edge) first.
+    """Obstacles from Table-I corners, best supported first: most consistent corner pairs
+    (hypotheses of one box from a stray pair are common, from many pairs rare), then the
+    tallest vertical edge (the nearest or largest box).
 
     For each Table-I corner ``C_g`` the vertical edge is followed to its other end
     (eqs. 6, 7) and the non-Manhattan legs ending there form ``C_h``. With two legs this
@@ -266,7 +268,7 @@ def find_obstacles(
         return []
     groups = _group_by_ovps(found, p.merge_deg)
     obstacles = [_obstacle(members, found, s, corners, layout, p) for members in groups]
-    obstacles.sort(key=lambda o: (-o.height_px, -o.pairs))
+    obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles
 
 

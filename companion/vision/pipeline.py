@@ -31,7 +31,8 @@ STAGES = ("lines", "vps", "corners", "obstacles", "heading")
 class Estimate:
     """What one frame says.
 
-    ``eta_deg``, ``phi_deg``: eq. 10 for the primary (largest) obstacle, None if none.
+    ``eta_deg``, ``phi_deg``: eq. 10 for the primary obstacle (the best supported, see
+    :func:`~companion.vision.obstacles.find_obstacles`), None if none.
     ``m_px``: its M in centred coordinates (y up), None if none or at infinity.
     ``obstacles``: every obstacle found, primary first. ``layout``: V1, V2, V3.
     ``segments`` N×4 and ``labels`` N (V1 0, V2 1, V3 2, none −1); ``corners``: the
