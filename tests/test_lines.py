@@ -68,3 +68,21 @@ def test_growth_stops_at_the_frame_border():
 def test_zero_growth_leaves_segments_alone():
     seg = np.array([[100.0, 59.5, 220.0, 59.5]])
     assert np.array_equal(extend_segments(_rectangle(), seg, max_px=0.0), seg)
+
+
+def test_only_the_ends_allowed_to_grow_do():
+    seg = np.array([[100.0, 59.5, 220.0, 59.5]])
+    out = extend_segments(_rectangle(), seg, max_px=24.0, step_px=2.0,
+                          ends=np.array([[False, True]]))
+    assert out[0, 0] == 100.0
+    assert out[0, 2] == pytest.approx(239.5, abs=2.5)
+
+
+def test_loose_ends_are_those_that_meet_no_other_segment():
+    from companion.vision.corners import loose_ends
+
+    segs = np.array([[0.0, 0.0, 50.0, 0.0],     # its right end meets the next one's left end
+                     [53.0, 4.0, 90.0, 30.0],
+                     [200.0, 200.0, 260.0, 200.0]])  # alone
+    assert loose_ends(segs, 10.0).tolist() == [[True, False], [False, True], [True, True]]
+    assert loose_ends(segs, 4.0).tolist() == [[True, True], [True, True], [True, True]]

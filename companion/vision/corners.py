@@ -31,7 +31,8 @@ from companion.vision.geometry import (
 )
 from companion.vision.vanishing import V1, V2, V3, VPParams, assign_segments
 
-__all__ = ["CornerParams", "Corners", "find_corners", "integrity", "table1_labels", "table1_mask"]
+__all__ = ["CornerParams", "Corners", "find_corners", "integrity", "loose_ends", "table1_labels",
+           "table1_mask"]
 
 
 @dataclass(frozen=True)
@@ -172,9 +173,21 @@ def find_corners(
 def _meeting_pairs(seg_ends: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
     """Index pairs ``i < j`` of segments (S×2×2 ends) with an end of each within ``radius_px``.
 
+    Pairs come out sorted by (i, j).
+    """
+    a, b = _close_ends(seg_ends, radius_px)
+    sa, sb = a // 2, b // 2
+    lo, hi = np.minimum(sa, sb), np.maximum(sa, sb)
+    key = np.unique((lo * len(seg_ends) + hi)[lo != hi])
+    return key // len(seg_ends), key % len(seg_ends)
+
+
+def _close_ends(seg_ends: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of endpoints (flat indices ``2·segment + end``) at most ``radius_px`` apart.
+
     A sweep along x: after sorting the 2·S endpoints by x only those less than
     ``radius_px`` apart in x are compared, so the cost grows with the number of close
-    pairs, not with S². Pairs come out sorted by (i, j).
+    pairs, not with S².
     """
     pts = seg_ends.reshape(-1, 2)
     order = np.argsort(pts[:, 0], kind="stable")
@@ -186,10 +199,23 @@ def _meeting_pairs(seg_ends: np.ndarray, radius_px: float) -> tuple[np.ndarray, 
     a, b = order[a], order[b]
     d = pts[a] - pts[b]
     close = d[:, 0] ** 2 + d[:, 1] ** 2 <= radius_px**2
-    sa, sb = a[close] // 2, b[close] // 2
-    lo, hi = np.minimum(sa, sb), np.maximum(sa, sb)
-    key = np.unique((lo * len(seg_ends) + hi)[lo != hi])
-    return key // len(seg_ends), key % len(seg_ends)
+    return a[close], b[close]
+
+
+def loose_ends(segments: np.ndarray, radius_px: float) -> np.ndarray:
+    """Which segment ends meet no other segment's end within ``radius_px`` (N×2 bool).
+
+    Only these may be grown toward a junction (:func:`~companion.vision.lines.
+    extend_segments`): an end that already meets another is at its junction, and growing
+    it could carry it past the corner, where the two legs would no longer meet.
+    """
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    loose = np.ones(2 * len(s), bool)
+    a, b = _close_ends(s.reshape(-1, 2, 2), radius_px)
+    other = a // 2 != b // 2
+    loose[a[other]] = False
+    loose[b[other]] = False
+    return loose.reshape(-1, 2)
 
 
 def _sin_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

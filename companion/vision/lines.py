@@ -102,7 +102,7 @@ def filter_segments(segments: np.ndarray, min_length_px: float, max_count: int) 
 
 def extend_segments(gray: np.ndarray, segments: np.ndarray, max_px: float = 24.0,
                     step_px: float = 2.0, offset_px: float = 2.0, min_contrast: float = 4.0,
-                    keep_frac: float = 0.5) -> np.ndarray:
+                    keep_frac: float = 0.5, ends: np.ndarray | None = None) -> np.ndarray:
     """Segments grown along their own line for as long as the image still shows their edge.
 
     Line detectors stop a few pixels short of junctions, where the gradient turns, but a
@@ -113,7 +113,8 @@ def extend_segments(gray: np.ndarray, segments: np.ndarray, max_px: float = 24.0
     grey levels), up to ``max_px``. Photometric evidence, so a leg is not stretched to a
     junction that is not in the image.
 
-    Inputs: ``gray`` H×W uint8, ``segments`` N×4 pixels. Output: N×4, same order.
+    Inputs: ``gray`` H×W uint8, ``segments`` N×4 pixels, ``ends`` N×2 bool: which ends
+    may grow (default all). Output: N×4, same order.
     """
     s = np.asarray(segments, dtype=float).reshape(-1, 4)
     t = int(max_px // step_px)
@@ -144,6 +145,8 @@ def extend_segments(gray: np.ndarray, segments: np.ndarray, max_px: float = 24.0
     ok = (sign[:, None] * step[:, 9:] >= need[:, None]) & (x[:, 9:] >= 0) & (x[:, 9:] <= w - 1) \
         & (y[:, 9:] >= 0) & (y[:, 9:] <= h - 1)
     grow = step_px * np.cumprod(ok.reshape(-1, 2, t), axis=2).sum(axis=2)  # N×2
+    if ends is not None:
+        grow = np.where(ends, grow, 0.0)
     out = s.copy()
     out[:, 0:2] -= grow[:, 0, None] * u
     out[:, 2:4] += grow[:, 1, None] * u

@@ -15,7 +15,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from companion.config import Config
-from companion.vision.corners import Corners, find_corners, table1_labels, table1_mask
+from companion.vision.corners import (
+    Corners,
+    find_corners,
+    loose_ends,
+    table1_labels,
+    table1_mask,
+)
 from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
@@ -152,7 +158,8 @@ class Pipeline:
         # Labels are judged on the detected segments; corners and pairs are built from the
         # same segments grown to the junctions the detector stopped short of.
         strict_labels = table1_labels(segments, layout.vps, vc.vanishing, vc.corners)
-        segments = extend_segments(gray, segments, max_px=vc.corners.leg_growth_px)
+        segments = extend_segments(gray, segments, max_px=vc.corners.leg_growth_px,
+                                   ends=loose_ends(segments, vc.corners.radius_px))
         corners = find_corners(segments, labels, vc.corners)
         obstacle_corners = corners.take(table1_mask(corners, labels, strict_labels))
         free_legs = ~np.isin(strict_labels, (V1, V2)) & (labels != V3)
