@@ -205,9 +205,10 @@ def _close_ends(seg_ends: np.ndarray, radius_px: float) -> tuple[np.ndarray, np.
 def loose_ends(segments: np.ndarray, radius_px: float) -> np.ndarray:
     """Which segment ends meet no other segment's end within ``radius_px`` (N×2 bool).
 
-    Only these may be grown toward a junction (:func:`~companion.vision.lines.
-    extend_segments`): an end that already meets another is at its junction, and growing
-    it could carry it past the corner, where the two legs would no longer meet.
+    Only these may be grown toward a junction
+    (:func:`~companion.vision.lines.extend_segments`): an end that already meets another
+    is at its junction, and growing it could carry it past the corner, where the two legs
+    would no longer meet.
     """
     s = np.asarray(segments, dtype=float).reshape(-1, 4)
     loose = np.ones(2 * len(s), bool)

@@ -99,7 +99,6 @@ def filter_segments(segments: np.ndarray, min_length_px: float, max_count: int) 
     return s[keep]
 
 
-
 def extend_segments(gray: np.ndarray, segments: np.ndarray, max_px: float = 24.0,
                     step_px: float = 2.0, offset_px: float = 2.0, min_contrast: float = 4.0,
                     keep_frac: float = 0.5, ends: np.ndarray | None = None) -> np.ndarray:

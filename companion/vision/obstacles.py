@@ -42,9 +42,6 @@ from companion.vision.vanishing import V1, V2, V3, LayoutVPs
 __all__ = ["ObstacleParams", "Obstacle", "find_obstacles"]
 
 
-REFIT_SLACK_DEG = 2.0  # how much farther from horizontal or orthogonal a refit may be
-
-
 @dataclass(frozen=True)
 class ObstacleParams:
     """Thresholds of eqs. 6–8 and of obstacle grouping."""
@@ -57,6 +54,7 @@ class ObstacleParams:
     non_manhattan_min_deg: float = 5.0  # OVPs at least this far from V1 and V2
     merge_deg: float = 3.0  # pairs whose OVPs agree this well are one obstacle
     member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well
+    refit_slack_deg: float = 2.0  # an OVP refit at most this farther from horizontal/orthogonal
 
 
 @dataclass(frozen=True)
@@ -331,7 +329,7 @@ def _obstacle(members, found, segments, corners: Corners, layout: LayoutVPs, p) 
     d3 = direction_of(o3, f, c)
     fit = _ovp_error_deg(direction_of(o1, f, c), direction_of(o2, f, c), d3)
     ref = _ovp_error_deg(ref1, ref2, d3)
-    if any(a > b + REFIT_SLACK_DEG for a, b in zip(fit, ref, strict=True)):
+    if any(a > b + p.refit_slack_deg for a, b in zip(fit, ref, strict=True)):
         o1, o2 = point_of(ref1, f, c), point_of(ref2, f, c)
     # Further Table-I corners whose legs point at O1 and O2 join the obstacle (λ3).
     joined = list(paired)
