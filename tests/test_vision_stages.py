@@ -5,9 +5,9 @@ import pytest
 
 from companion.vision.corners import (
     CornerParams,
-    _meeting_pairs,
     find_corners,
-    integrity,
+    loose_ends,
+    obstacle_legs,
     table1_mask,
 )
 from companion.vision.geometry import angle_between_directions_deg, direction_of, to_pixels
@@ -126,33 +126,34 @@ def test_converging_floor_lines_are_not_taken_for_verticals():
     assert far
 
 
-def test_meeting_pairs_are_exactly_the_pairs_with_ends_within_the_radius():
+def test_loose_ends_are_exactly_the_ends_with_no_other_end_within_the_radius():
+    # The endpoint sweep behind loose_ends and the corner search, against brute force.
     rng = np.random.default_rng(5)
     ends = rng.uniform(0, 200, (120, 2, 2))
     ends[7] = ends[3] + 2.0  # ends exactly 2√2 apart, and a segment meeting itself is no pair
     ends[9, 1] = ends[9, 0]
     r = 6.0
     d = np.linalg.norm(ends[:, None, :, None, :] - ends[None, :, None, :, :], axis=-1)
-    want = [(i, j) for i in range(120) for j in range(i + 1, 120) if d[i, j].min() <= r]
-    i, j = _meeting_pairs(ends, r)
-    assert list(zip(i.tolist(), j.tolist(), strict=True)) == want
-    assert (3, 7) in want and len(want) > 20
+    d[np.arange(120), np.arange(120)] = np.inf  # a segment's own ends
+    want = d.min(axis=(1, 3)) > r  # segment × end: meets no end of another segment
+    got = loose_ends(ends.reshape(-1, 4), r)
+    assert np.array_equal(got, want)
+    assert not got[3].all() and not got[7].all() and got[9].all() and (~got).sum() > 20
 
 
-def test_integrity_is_zero_when_legs_end_at_the_corner():
-    pc = np.array([[10.0, 10.0]])
-    mids = np.array([[[20.0, 10.0], [10.0, 30.0], [0.0, 5.0]]])
-    lengths = np.array([[20.0, 40.0, np.hypot(20, 10)]])
-    assert integrity(pc, mids[:, :2], lengths[:, :2]) == pytest.approx([0.0])
-    assert integrity(pc, mids, lengths) == pytest.approx([0.0])
-
-
-def test_integrity_grows_with_the_gap():
-    pc = np.array([[0.0, 0.0]])
-    # A leg ending 5 px short of the corner, and one crossing it by 5 px.
-    mids = np.array([[[15.0, 0.0], [0.0, 5.0]]])
-    lengths = np.array([[20.0, 20.0]])
-    assert integrity(pc, mids, lengths) == pytest.approx([5.0 + 5.0])
+def test_a_leg_crossing_past_the_corner_costs_like_one_stopping_short():
+    # eq. 3: |d(p_c, p_s) − l_s/2| is the distance from p_c to the leg's nearer end, on
+    # either side: L_s crossing p_c by 5 px costs 5, as a 5-px gap would.
+    corner = _box_corner()
+    u = (corner[0, :2] - corner[0, 2:]) / np.linalg.norm(corner[0, :2] - corner[0, 2:])
+    crossing = corner.copy()
+    crossing[0, :2] += 5.0 * u
+    labels = np.array([NONE, NONE, V3])
+    clean, crossed = find_corners(corner, labels), find_corners(crossing, labels)
+    assert clean.lambda_lp[0] == pytest.approx(0.0, abs=1e-9)
+    assert crossed.points_px[0] == pytest.approx([300, 300], abs=1e-6)
+    assert crossed.lambda_lp[0] == pytest.approx(5.0, abs=1e-6)
+    assert crossed.lambda_c[0] == pytest.approx(5.0, abs=1e-6)
 
 
 def _box_corner(gap=0.0):
@@ -194,10 +195,13 @@ def test_find_corners_needs_a_vertical_leg_and_honours_top_k():
 def test_table1_keeps_only_non_manhattan_horizontal_legs_on_a_vertical():
     segs = _box_corner()
     corners = find_corners(segs, np.array([NONE, NONE, V3]))
-    assert table1_mask(corners, np.array([NONE, NONE, V3]), np.array([NONE, NONE, V3])).all()
+    labels = np.array([NONE, NONE, V3])
+    assert table1_mask(corners, labels, obstacle_legs(labels, labels)).all()
     # A leg that points tightly at V1 makes it a Manhattan (room) corner.
-    assert not table1_mask(corners, np.array([V1, NONE, V3]), np.array([V1, NONE, V3])).any()
-    assert not table1_mask(corners, np.array([NONE, V2, V3]), np.array([NONE, V2, V3])).any()
+    for strict in ([V1, NONE, V3], [NONE, V2, V3]):
+        assert not table1_mask(corners, labels, obstacle_legs(labels, np.array(strict))).any()
+    # So does a vertical "leg" (it is L_r's kind, not a horizontal edge).
+    assert not table1_mask(corners, labels, obstacle_legs(np.array([V3, NONE, V3]), labels)).any()
 
 
 def _project(points_cam):
@@ -241,7 +245,7 @@ def test_obstacle_from_two_leg_corners_of_its_outline():
         observed=(True, True, True), support_px=np.ones(3), focal_px=F, centre=C)
     labels = np.array([V3, V3, NONE, NONE, NONE, NONE])
     corners = find_corners(segs, labels, CornerParams())
-    assert len(corners.take(table1_mask(corners, labels, labels))) == 0  # no 3-leg corner
+    assert not table1_mask(corners, labels, obstacle_legs(labels, labels)).any()  # no 3-leg corner
     found = find_obstacles(segs, corners.take(np.zeros(len(corners), bool)), layout,
                            labels == NONE, labels)
     assert len(found) == 1
@@ -255,9 +259,36 @@ def test_obstacle_from_two_leg_corners_of_its_outline():
                           ~np.isin(labels_m, (V1, V2, V3)), labels_m) == []
 
 
+def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
+    # The top corner of a box 35° off the room, its vertical edge down to the floor, and no
+    # legs at the bottom: both OVPs are where the top legs cross the horizon, which for a
+    # level camera (V3 straight down, at infinity) is the centre row.
+    from companion.vision.obstacles import find_obstacles
+    from companion.vision.vanishing import LayoutVPs
+
+    a = np.radians(35.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.2, 1.2, 4.0])  # on the floor, 1.2 m below the camera
+    top = front + [0.0, -0.5, 0.0]  # well below eye level: its top face shows
+    b, t, t_u, t_v = _project([front, top, top + 0.8 * u, top + 0.8 * v])
+    segs = np.array([[*t, *t_u], [*t, *t_v], [*b, *t]])
+    labels = np.array([NONE, NONE, V3])
+    layout = LayoutVPs(
+        vps=np.array([[1.0, 0.0, 0.0], [C[0], C[1], 1.0], [0.0, 1.0, 0.0]]),
+        observed=(True, True, True), support_px=np.ones(3), focal_px=F, centre=C)
+    corners = find_corners(segs, labels)
+    assert len(corners) == 1
+    found = find_obstacles(segs, corners, layout, labels == NONE, labels)
+    assert len(found) == 1 and found[0].pairs == 1
+    for ovp in found[0].ovps[:2]:
+        assert to_pixels(ovp)[1] == pytest.approx(C[1], abs=1e-6)
+    dirs = direction_of(found[0].ovps[:2], F, C)
+    for face in (u, v):
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 1e-6
+
+
 def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
     from companion.vision.corners import table1_labels
-    from companion.vision.vanishing import VPParams
 
     vps = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])  # V1 at x-infinity
     def leg(length, angle_deg):
@@ -267,8 +298,8 @@ def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
                      leg(200, 3.0),   # long, 3° off V1: 5 px at its ends, a rotation
                      leg(26, 8.0),    # short, 8° off V1: 1.8 px, a rotation
                      leg(200, 1.0)])  # long, 1° off V1: tightly Manhattan
-    labels = table1_labels(segs, vps, VPParams(), CornerParams())
+    labels = table1_labels(segs, vps, CornerParams())
     assert labels.tolist() == [V1, NONE, NONE, V1]
     # With no noise allowance only the angle-and-residual rule is left.
-    strict = table1_labels(segs, vps, VPParams(), CornerParams(manhattan_leg_noise_px=0.0))
+    strict = table1_labels(segs, vps, CornerParams(manhattan_leg_noise_px=0.0))
     assert strict.tolist() == [NONE, NONE, NONE, V1]

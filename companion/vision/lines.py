@@ -15,9 +15,10 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+from companion.vision._lines import grow_segments
 from companion.vision.geometry import segment_lengths
 
-__all__ = ["DETECTORS", "make_detector", "to_gray", "filter_segments"]
+__all__ = ["DETECTORS", "make_detector", "to_gray", "filter_segments", "extend_segments"]
 
 Detector = Callable[[np.ndarray], np.ndarray]
 
@@ -115,38 +116,5 @@ def extend_segments(gray: np.ndarray, segments: np.ndarray, max_px: float = 24.0
     Inputs: ``gray`` H×W uint8, ``segments`` N×4 pixels, ``ends`` N×2 bool: which ends
     may grow (default all). Output: N×4, same order.
     """
-    s = np.asarray(segments, dtype=float).reshape(-1, 4)
-    t = int(max_px // step_px)
-    if len(s) == 0 or t < 1:
-        return s.copy()
-    h, w = gray.shape[:2]
-    d = s[:, 2:4] - s[:, 0:2]
-    length = np.hypot(d[:, 0], d[:, 1])
-    u = d / np.maximum(length, 1e-9)[:, None]
-    out_steps = step_px * np.arange(1, t + 1)
-    # Distance along each segment from its first end: 9 samples inside, then t beyond the
-    # first end (negative) and t beyond the second.
-    along = np.empty((len(s), 9 + 2 * t))
-    along[:, :9] = np.linspace(0.1, 0.9, 9)[None] * length[:, None]
-    along[:, 9:9 + t] = -out_steps
-    along[:, 9 + t:] = length[:, None] + out_steps
-    x = s[:, 0, None] + along * u[:, 0, None]
-    y = s[:, 1, None] + along * u[:, 1, None]
-    nx, ny = -u[:, 1, None] * offset_px, u[:, 0, None] * offset_px
-    mx = np.hstack([x + nx, x - nx]).astype(np.float32)
-    my = np.hstack([y + ny, y - ny]).astype(np.float32)
-    vals = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    m = along.shape[1]
-    step = vals[:, :m].astype(np.float32) - vals[:, m:]
-    inside = np.sort(step[:, :9], axis=1)[:, 4]  # median step across the segment
-    sign = np.sign(inside)
-    need = np.maximum(min_contrast, keep_frac * np.abs(inside))
-    ok = (sign[:, None] * step[:, 9:] >= need[:, None]) & (x[:, 9:] >= 0) & (x[:, 9:] <= w - 1) \
-        & (y[:, 9:] >= 0) & (y[:, 9:] <= h - 1)
-    grow = step_px * np.cumprod(ok.reshape(-1, 2, t), axis=2).sum(axis=2)  # N×2
-    if ends is not None:
-        grow = np.where(ends, grow, 0.0)
-    out = s.copy()
-    out[:, 0:2] -= grow[:, 0, None] * u
-    out[:, 2:4] += grow[:, 1, None] * u
-    return out
+    return grow_segments(gray, segments, ends, max_px, step_px, offset_px, min_contrast,
+                         keep_frac)

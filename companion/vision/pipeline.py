@@ -19,6 +19,7 @@ from companion.vision.corners import (
     Corners,
     find_corners,
     loose_ends,
+    obstacle_legs,
     table1_labels,
     table1_mask,
 )
@@ -26,7 +27,7 @@ from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
-from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
+from companion.vision.vanishing import V1, V2, LayoutVPs, assign_segments, detect_layout_vps
 
 __all__ = ["Estimate", "Pipeline", "STAGES"]
 
@@ -82,13 +83,19 @@ class Pipeline:
     def __init__(self, config: Config | None = None):
         self.config = config or Config()
         self._detectors: dict[float, object] = {}
+        vp = self.config.vision.vanishing
+        self._known_focal_vp = replace(vp, orthogonal_tol_deg=vp.known_focal_orthogonal_tol_deg)
 
-    def _detector(self, min_len: float):
+    def detector_for(self, width: int, height: int):
+        """The configured line detector for frames of ``width``×``height`` (built once per
+        frame size) and its minimum segment length in pixels (``min_segment_frac`` of the
+        diagonal)."""
+        min_len = self.config.vision.min_segment_frac * float(np.hypot(width, height))
         key = round(min_len, 1)
         if key not in self._detectors:
             self._detectors[key] = make_detector(self.config.vision.detector, min_len,
                                                  self.config.vision.edge_threshold)
-        return self._detectors[key]
+        return self._detectors[key], min_len
 
     def focal_for(self, width: int) -> float:
         """Focal length in pixels: configured, else half the width (90° field of view)."""
@@ -105,8 +112,8 @@ class Pipeline:
         """
         vp = self.config.vision.vanishing
         if self.config.camera.focal_px:
-            known = replace(vp, orthogonal_tol_deg=vp.known_focal_orthogonal_tol_deg)
-            return detect_layout_vps(segments, w, h, self.config.camera.focal_px, known), "given"
+            return detect_layout_vps(segments, w, h, self.config.camera.focal_px,
+                                     self._known_focal_vp), "given"
         centre = principal_point(w, h)
         first = None
         for guess in (w / 2.0, float(w)):
@@ -124,10 +131,9 @@ class Pipeline:
         return self._segments(to_gray(frame))
 
     def _segments(self, gray: np.ndarray) -> np.ndarray:
-        vc = self.config.vision
         h, w = gray.shape[:2]
-        min_len = vc.min_segment_frac * float(np.hypot(w, h))
-        return filter_segments(self._detector(min_len)(gray), min_len, vc.max_segments)
+        detect, min_len = self.detector_for(w, h)
+        return filter_segments(detect(gray), min_len, self.config.vision.max_segments)
 
     def layout(self, frame: np.ndarray) -> tuple[LayoutVPs, str]:
         """Stages 1–2 alone, frame → layout VPs and the focal length's source (given,
@@ -157,12 +163,12 @@ class Pipeline:
 
         # Labels are judged on the detected segments; corners and pairs are built from the
         # same segments grown to the junctions the detector stopped short of.
-        strict_labels = table1_labels(segments, layout.vps, vc.vanishing, vc.corners)
+        strict_labels = table1_labels(segments, layout.vps, vc.corners)
         segments = extend_segments(gray, segments, max_px=vc.corners.leg_growth_px,
                                    ends=loose_ends(segments, vc.corners.radius_px))
         corners = find_corners(segments, labels, vc.corners)
-        obstacle_corners = corners.take(table1_mask(corners, labels, strict_labels))
-        free_legs = ~np.isin(strict_labels, (V1, V2)) & (labels != V3)
+        free_legs = obstacle_legs(labels, strict_labels)
+        obstacle_corners = corners.take(table1_mask(corners, labels, free_legs))
         t3 = time.perf_counter()
         ms["corners"] = (t3 - t2) * 1e3
 

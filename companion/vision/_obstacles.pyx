@@ -1,0 +1,752 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Compiled loops of the obstacle stage (eqs. 5–8); the method is described in
+:mod:`companion.vision.obstacles`, which calls :func:`find`. The helpers keep the names of
+the steps described there."""
+
+import numpy as np
+
+from libc.math cimport fabs, hypot, sin, sqrt
+from libc.stdlib cimport free, malloc, realloc
+
+from companion.vision._geometry cimport (
+    angle_between_deg,
+    cross3,
+    dot3,
+    norm3,
+    segment_line,
+    smallest_eigenvector,
+    unit3,
+    vp_angle_deg,
+    vp_sin,
+)
+
+cdef double DEG2RAD = 0.017453292519943295
+cdef double INF = float("inf")
+
+
+cdef struct Params:
+    double collinear_px
+    double min_edge_px
+    double horizon_tol_deg
+    double orthogonal_tol_deg
+    double single_corner_orthogonal_tol_deg
+    double non_manhattan_min_deg
+    double merge_deg
+    double member_angle_deg
+    double refit_slack_deg
+    double radius_px
+    double leg_gap_frac
+
+
+# What every step needs of the layout: the camera, V3's direction, the horizon and the
+# directions of V1 and V2.
+cdef struct Frame:
+    double f
+    double cx
+    double cy
+    double d3[3]
+    double horizon[3]
+    double l1[3]
+    double l2[3]
+
+
+# An obstacle hypothesis: OVP directions, λ3 (eq. 8), its vertical edge's length, the
+# Table-I corner it rests on (−1: none), further legs and corner points.
+cdef struct Hypothesis:
+    double d1[3]
+    double d2[3]
+    double lam3
+    double edge
+    Py_ssize_t corner
+    Py_ssize_t legs[4]
+    int nlegs
+    double points[8]
+    int npoints
+
+
+cdef struct Hypotheses:
+    Hypothesis* items
+    Py_ssize_t count
+    Py_ssize_t cap
+
+
+cdef Hypothesis* new_hypothesis(Hypotheses* hs) except NULL:
+    cdef Hypothesis* grown
+    if hs.count == hs.cap:
+        hs.cap = max(16, 2 * hs.cap)
+        grown = <Hypothesis*>realloc(hs.items, hs.cap * sizeof(Hypothesis))
+        if grown == NULL:
+            raise MemoryError()
+        hs.items = grown
+    cdef Hypothesis* h = &hs.items[hs.count]
+    hs.count += 1
+    h.corner = -1
+    h.nlegs = 0
+    h.npoints = 0
+    return h
+
+
+cdef inline void direction_of(Frame* fr, const double* p, double* out) noexcept nogil:
+    """Unit 3-D direction ``K⁻¹ p`` of a homogeneous pixel point (zero stays zero)."""
+    out[0] = p[0] - fr.cx * p[2]
+    out[1] = p[1] - fr.cy * p[2]
+    out[2] = fr.f * p[2]
+    unit3(out)
+
+
+cdef inline void point_of(Frame* fr, const double* d, double* out) noexcept nogil:
+    """Unit homogeneous pixel point ``K d`` of a 3-D direction."""
+    out[0] = fr.f * d[0] + fr.cx * d[2]
+    out[1] = fr.f * d[1] + fr.cy * d[2]
+    out[2] = d[2]
+    unit3(out)
+
+
+cdef inline bint intersect(const double* a, const double* b, double* out) noexcept nogil:
+    """``a × b`` scaled to unit norm; False (and zero) when the two are the same."""
+    cross3(a, b, out)
+    return unit3(out) > 0
+
+
+cdef inline double horizon_error(Frame* fr, const double* d) noexcept nogil:
+    """How far a direction is from horizontal (⟂ V3), degrees."""
+    return fabs(90.0 - angle_between_deg(d, fr.d3))
+
+
+cdef inline void ovp_error(Frame* fr, const double* d1, const double* d2,
+                           double* horizon, double* ortho) noexcept nogil:
+    """λ3 (eq. 8) parts: how far O1, O2 are from horizontal, and from orthogonal."""
+    cdef double a = horizon_error(fr, d1), b = horizon_error(fr, d2)
+    horizon[0] = a if a > b else b
+    ortho[0] = fabs(90.0 - angle_between_deg(d1, d2))
+
+
+cdef inline bint off_layout(Frame* fr, Params* p, const double* d) noexcept nogil:
+    """At least ``non_manhattan_min_deg`` from V1 and from V2."""
+    return (angle_between_deg(d, fr.l1) >= p.non_manhattan_min_deg
+            and angle_between_deg(d, fr.l2) >= p.non_manhattan_min_deg)
+
+
+cdef inline double end_gap(double[:, ::1] s, Py_ssize_t i, double x, double y) noexcept nogil:
+    """Distance from (x, y) to the nearer end of segment ``i``."""
+    cdef double a = hypot(s[i, 0] - x, s[i, 1] - y)
+    cdef double b = hypot(s[i, 2] - x, s[i, 3] - y)
+    return a if a < b else b
+
+
+cdef bint horizon_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t a, Py_ssize_t b,
+                       double* d1, double* d2, double* ortho) noexcept nogil:
+    """OVPs where legs ``a`` and ``b`` cross the horizon, for a corner whose other end
+    shows no leg: the horizon test then holds by construction, so only the tight
+    ``single_corner_orthogonal_tol_deg`` and the distance from V1, V2 separate a box from
+    chance."""
+    cdef double o1[3]
+    cdef double o2[3]
+    cdef double hor
+    cdef bint ok1 = intersect(&lines[a, 0], fr.horizon, o1)
+    cdef bint ok2 = intersect(&lines[b, 0], fr.horizon, o2)
+    direction_of(fr, o1, d1)
+    direction_of(fr, o2, d2)
+    ovp_error(fr, d1, d2, &hor, ortho)
+    return (ok1 and ok2 and ortho[0] <= p.single_corner_orthogonal_tol_deg
+            and off_layout(fr, p, d1) and off_layout(fr, p, d2))
+
+
+cdef void far_ends(double[:, ::1] s, double[:, ::1] lines, double[:, ::1] pc,
+                   long long[::1] cr, Py_ssize_t[::1] verticals, Params* p,
+                   double[:, ::1] far, double[::1] reach, unsigned char[::1] usable) noexcept nogil:
+    """The other end of each corner's vertical edge, following collinear V3 segments.
+
+    A V3 segment is on the edge of ``L_r^g`` when λ1 (eq. 6), the largest distance of
+    either segment's endpoints from the other's line, is within ``collinear_px``. The far
+    end is the endpoint farthest from ``p_c`` on the side of the leg's midpoint (λ2 → π,
+    eq. 7: the partner lies the other way from its own leg)."""
+    cdef Py_ssize_t k, j, v, r, e
+    cdef double ux, uy, nrm, lam1, d, along, best
+    for k in range(pc.shape[0]):
+        r = cr[k]
+        ux = 0.5 * (s[r, 0] + s[r, 2]) - pc[k, 0]
+        uy = 0.5 * (s[r, 1] + s[r, 3]) - pc[k, 1]
+        nrm = hypot(ux, uy)
+        usable[k] = nrm >= 1e-9
+        if usable[k]:
+            ux /= nrm
+            uy /= nrm
+        best = -INF
+        for j in range(verticals.shape[0]):
+            v = verticals[j]
+            if v != r:
+                lam1 = 0.0
+                for e in range(2):
+                    d = fabs(s[v, 2 * e] * lines[r, 0] + s[v, 2 * e + 1] * lines[r, 1] + lines[r, 2])
+                    lam1 = d if d > lam1 else lam1
+                    d = fabs(s[r, 2 * e] * lines[v, 0] + s[r, 2 * e + 1] * lines[v, 1] + lines[v, 2])
+                    lam1 = d if d > lam1 else lam1
+                if lam1 > p.collinear_px:
+                    continue
+            for e in range(2):
+                along = (s[v, 2 * e] - pc[k, 0]) * ux + (s[v, 2 * e + 1] - pc[k, 1]) * uy
+                best = along if along > best else best
+        reach[k] = best
+        usable[k] = usable[k] and best >= p.min_edge_px
+        far[k, 0] = pc[k, 0] + (best if usable[k] else 0.0) * ux
+        far[k, 1] = pc[k, 1] + (best if usable[k] else 0.0) * uy
+
+
+cdef Py_ssize_t partner_legs(double[:, ::1] s, double[:, ::1] lines, double px, double py,
+                             double ex, double ey, double edge, Py_ssize_t leg_s,
+                             Py_ssize_t leg_n, Py_ssize_t[::1] free_idx, Params* p,
+                             Py_ssize_t* out) noexcept nogil:
+    """The free segments that are legs of C_h at the far end (ex, ey) of the edge from
+    ``p_c`` = (px, py): a leg's line must cross the vertical line within
+    ``radius_px + leg_gap_frac · edge`` of the far end, on the far half of the edge, and
+    the leg must end within ``radius_px`` of that crossing; C_g's own legs are not C_h's.
+    Writes them to ``out`` in order; returns their count."""
+    cdef double vline[3]
+    cdef double q[3]
+    cdef double nrm, qx, qy, ax = (ex - px) / edge, ay = (ey - py) / edge
+    cdef Py_ssize_t j, f, count = 0
+    vline[0] = py - ey
+    vline[1] = ex - px
+    vline[2] = px * ey - py * ex
+    nrm = hypot(vline[0], vline[1])
+    vline[0] /= nrm
+    vline[1] /= nrm
+    vline[2] /= nrm
+    for j in range(free_idx.shape[0]):
+        f = free_idx[j]
+        if f == leg_s or f == leg_n:
+            continue
+        intersect(&lines[f, 0], vline, q)
+        if fabs(q[2]) < 1e-12:
+            continue
+        qx = q[0] / q[2]
+        qy = q[1] / q[2]
+        if hypot(qx - ex, qy - ey) > p.radius_px + p.leg_gap_frac * edge:
+            continue
+        if (qx - px) * ax + (qy - py) * ay < 0.5 * edge:
+            continue
+        if end_gap(s, f, qx, qy) > p.radius_px:
+            continue
+        out[count] = f
+        count += 1
+    return count
+
+
+cdef bint partner_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t leg_s,
+                       Py_ssize_t leg_n, const Py_ssize_t* hs, Py_ssize_t nh,
+                       double* d1, double* d2, double* lam3) noexcept nogil:
+    """The best OVPs of corner C_g's legs paired with the legs ``hs`` of its partner C_h.
+
+    O1 = one leg of C_g × a partner leg ``h``; O2 = the other leg × a second partner leg
+    ``h2``, or × the horizon when C_h shows only one leg. Two real partner legs beat one;
+    then the smaller λ3 (eq. 8); then the first found. False when none is consistent."""
+    cdef Py_ssize_t i, j, a, g1, g2, h, h2
+    cdef double o1[3]
+    cdef double o2[3]
+    cdef double e1[3]
+    cdef double e2[3]
+    cdef double hor, ortho, lam
+    cdef bint found = False, found_real = False, ok1, ok2
+    for i in range(nh):
+        h = hs[i]
+        for a in range(2):
+            g1 = leg_s if a == 0 else leg_n
+            g2 = leg_n if a == 0 else leg_s
+            for j in range(-1, nh):
+                h2 = -1 if j < 0 else hs[j]
+                if h2 == h:
+                    continue
+                if found_real and h2 < 0:
+                    continue
+                ok1 = intersect(&lines[g1, 0], &lines[h, 0], o1)
+                if h2 < 0:
+                    ok2 = intersect(&lines[g2, 0], fr.horizon, o2)
+                else:
+                    ok2 = intersect(&lines[g2, 0], &lines[h2, 0], o2)
+                if not (ok1 and ok2):
+                    continue
+                direction_of(fr, o1, e1)
+                direction_of(fr, o2, e2)
+                ovp_error(fr, e1, e2, &hor, &ortho)
+                if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg:
+                    continue
+                if not (off_layout(fr, p, e1) and off_layout(fr, p, e2)):
+                    continue
+                lam = ortho * p.horizon_tol_deg / p.orthogonal_tol_deg
+                lam = hor if hor > lam else lam
+                if found and (found_real or h2 < 0) and lam >= lam3[0]:
+                    continue
+                found = True
+                found_real = h2 >= 0
+                lam3[0] = lam
+                d1[0], d1[1], d1[2] = e1[0], e1[1], e1[2]
+                d2[0], d2[1], d2[2] = e2[0], e2[1], e2[2]
+    return found
+
+
+cdef list vertical_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
+                          Py_ssize_t[::1] verticals, Params* p):
+    """Vertical edges: V3 segments joined with collinear ones (λ1, eq. 6) across small
+    gaps. Returns a list of (x_a, y_a, x_b, y_b, length), the two extreme endpoints."""
+    cdef Py_ssize_t nv = verticals.shape[0], i, j, e, k, vi, vj, m, base
+    chains = []
+    if nv == 0:
+        return chains
+    # Distance of the shorter segment's endpoints from the longer one's line: a short
+    # piece's own direction is too noisy to extrapolate along a long edge.
+    cdef unsigned char[:, ::1] collinear = np.zeros((nv, nv), np.uint8)
+    cdef Py_ssize_t[::1] members_count = np.zeros(nv, np.intp)
+    cdef double d, dist, lo, hi, gap, ox, oy, axx, axy, nrm, ta, tb
+    for i in range(nv):
+        for j in range(nv):
+            if i == j:
+                collinear[i, j] = 1
+                continue
+            vi, vj = verticals[i], verticals[j]
+            if lengths[vi] < lengths[vj]:
+                vi, vj = vj, vi
+            dist = 0.0
+            for e in range(2):
+                d = fabs(lines[vi, 0] * s[vj, 2 * e] + lines[vi, 1] * s[vj, 2 * e + 1]
+                         + lines[vi, 2])
+                dist = d if d > dist else dist
+            collinear[i, j] = dist <= p.collinear_px
+    for i in range(nv):
+        for j in range(nv):
+            members_count[i] += collinear[i, j]
+    processed = []
+    for i in range(nv):
+        vi = verticals[i]
+        if members_count[i] == 1:  # most vertical segments: the chain is the segment itself
+            if lengths[vi] >= 2 * p.min_edge_px:
+                chains.append((s[vi, 0], s[vi, 1], s[vi, 2], s[vi, 3], lengths[vi]))
+            continue
+        # One chain per distinct set of collinear members, grown from its first segment.
+        duplicate = False
+        for k in processed:
+            for j in range(nv):
+                if collinear[i, j] != collinear[<Py_ssize_t>k, j]:
+                    break
+            else:
+                duplicate = True
+                break
+        if duplicate:
+            continue
+        processed.append(i)
+        # Measure along the longest member: its direction is the most accurate.
+        base = vi
+        for j in range(nv):
+            if collinear[i, j] and j != i and lengths[verticals[j]] > lengths[base]:
+                base = verticals[j]
+        ox, oy = s[base, 0], s[base, 1]
+        axx, axy = s[base, 2] - ox, s[base, 3] - oy
+        nrm = hypot(axx, axy)
+        nrm = nrm if nrm > 1e-9 else 1e-9
+        axx /= nrm
+        axy /= nrm
+        spans = []
+        for j in range(nv):
+            if collinear[i, j]:
+                vj = verticals[j]
+                ta = (s[vj, 0] - ox) * axx + (s[vj, 1] - oy) * axy
+                tb = (s[vj, 2] - ox) * axx + (s[vj, 3] - oy) * axy
+                spans.append((min(ta, tb), max(ta, tb)))
+                if j == i:
+                    lo, hi = min(ta, tb), max(ta, tb)
+        spans.sort()
+        for a, b in spans + spans[::-1]:
+            gap = p.radius_px + p.leg_gap_frac * (hi - lo)
+            if a <= hi + gap and b >= lo - gap:
+                lo, hi = min(lo, a), max(hi, b)
+        if hi - lo >= 2 * p.min_edge_px:
+            chains.append((ox + lo * axx, oy + lo * axy, ox + hi * axx, oy + hi * axy, hi - lo))
+    return chains
+
+
+cdef list edge_legs(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
+                    Py_ssize_t[::1] verticals, Py_ssize_t[::1] free_idx, Params* p):
+    """Vertical edges with the non-Manhattan legs that end at each of their two ends.
+
+    Returns a list of (chain, legs_a, legs_b) with ``chain`` as :func:`vertical_chains`
+    gives it; a leg is (segment index, side): the side (±1) of the edge it leaves toward.
+    Legs are at least 20° off the edge."""
+    out = []
+    chains = vertical_chains(s, lengths, lines, verticals, p)
+    if free_idx.shape[0] == 0 or not chains:
+        return out
+    cdef double min_side = sin(20.0 * DEG2RAD), r2 = p.radius_px * p.radius_px
+    cdef double ex, ey, d0, d1, axx, axy, spx, spy, side
+    cdef Py_ssize_t j, f, end
+    for chain in chains:
+        xa, ya, xb, yb, length = chain
+        axx, axy = (xb - xa) / length, (yb - ya) / length
+        legs = ([], [])
+        for end in range(2):
+            ex, ey = (xa, ya) if end == 0 else (xb, yb)
+            for j in range(free_idx.shape[0]):
+                f = free_idx[j]
+                d0 = (s[f, 0] - ex) * (s[f, 0] - ex) + (s[f, 1] - ey) * (s[f, 1] - ey)
+                d1 = (s[f, 2] - ex) * (s[f, 2] - ex) + (s[f, 3] - ey) * (s[f, 3] - ey)
+                if min(d0, d1) > r2 or lengths[f] < p.min_edge_px:
+                    continue
+                # The leg leaves the chain end along (its far end − its near end).
+                spx, spy = s[f, 2] - s[f, 0], s[f, 3] - s[f, 1]
+                side = (axx * spy - axy * spx) / (lengths[f] if lengths[f] > 1e-12 else 1e-12)
+                if d1 < d0:
+                    side = -side
+                if fabs(side) >= min_side:
+                    legs[end].append((f, 1.0 if side > 0 else -1.0))
+        if legs[0] or legs[1]:
+            out.append((chain, legs[0], legs[1]))
+    return out
+
+
+cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] lines, list edges,
+                            Hypotheses* halves) except *:
+    """One OVP from each vertical edge whose two ends both show a leg on the same side.
+
+    A box's outline edge (and any vertical edge with one face hidden) gives corners of two
+    legs only: the vertical edge and one horizontal edge at each end. When the two
+    horizontal edges bound one face they are parallel in space and meet at that face's
+    OVP (eqs. 6–8 with one leg per corner), which must lie on the horizon and away from
+    V1 and V2."""
+    cdef double o[3]
+    cdef double d[3]
+    cdef Py_ssize_t ka, kb
+    cdef Hypothesis* h
+    for chain, legs_a, legs_b in edges:
+        for ka, sa in legs_a:
+            for kb, sb in legs_b:
+                if sa != sb:
+                    continue
+                if not intersect(&lines[ka, 0], &lines[kb, 0], o):
+                    continue
+                direction_of(fr, o, d)
+                if horizon_error(fr, d) > p.horizon_tol_deg or not off_layout(fr, p, d):
+                    continue
+                h = new_hypothesis(halves)
+                h.d1[0], h.d1[1], h.d1[2] = d[0], d[1], d[2]
+                h.edge = chain[4]
+                h.legs[0], h.legs[1] = ka, kb
+                h.nlegs = 2
+                h.points[0], h.points[1], h.points[2], h.points[3] = chain[:4]
+                h.npoints = 2
+
+
+cdef void pair_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* found) except *:
+    """Two silhouette OVPs at a right angle (λ3, eq. 8) make an obstacle hypothesis."""
+    cdef Py_ssize_t i, j, k
+    cdef double hor, ortho, lam
+    cdef Hypothesis* a
+    cdef Hypothesis* b
+    cdef Hypothesis* h
+    for i in range(halves.count):
+        for j in range(i + 1, halves.count):
+            a, b = &halves.items[i], &halves.items[j]
+            ovp_error(fr, a.d1, b.d1, &hor, &ortho)
+            if ortho > p.orthogonal_tol_deg:
+                continue
+            lam = ortho * p.horizon_tol_deg / p.orthogonal_tol_deg
+            h = new_hypothesis(found)
+            h.d1[0], h.d1[1], h.d1[2] = a.d1[0], a.d1[1], a.d1[2]
+            h.d2[0], h.d2[1], h.d2[2] = b.d1[0], b.d1[1], b.d1[2]
+            h.lam3 = hor if hor > lam else lam
+            h.edge = a.edge if a.edge > b.edge else b.edge
+            h.nlegs = 4
+            h.legs[0], h.legs[1], h.legs[2], h.legs[3] = a.legs[0], a.legs[1], b.legs[0], b.legs[1]
+            h.npoints = 4
+            for k in range(4):
+                h.points[k] = a.points[k]
+                h.points[4 + k] = b.points[k]
+
+
+cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list edges,
+                             Hypotheses* found) except *:
+    """A leg at each end of one vertical edge whose horizon crossings are orthogonal OVPs.
+
+    The fallback for an edge whose two legs bound two different faces (a box seen from
+    above its top, its faces too alike for the edge between them to show): each leg's OVP
+    is where it crosses the horizon, as for a single corner. One leg must be at each end:
+    two legs at one end may be a rug's corner touching a door frame. Per edge, its most
+    orthogonal pair (the first on ties)."""
+    cdef double d1[3]
+    cdef double d2[3]
+    cdef double b1[3]
+    cdef double b2[3]
+    cdef double ortho, best
+    cdef Py_ssize_t ka, kb, k
+    cdef Hypothesis* h
+    for chain, legs_a, legs_b in edges:
+        if chain[4] < 2 * p.min_edge_px:
+            continue
+        best = INF
+        for ka, _ in legs_a:
+            for kb, _ in legs_b:
+                if ka == kb:
+                    continue
+                if not horizon_ovps(fr, p, lines, ka, kb, d1, d2, &ortho) or ortho >= best:
+                    continue
+                best = ortho
+                for k in range(3):
+                    b1[k] = d1[k]
+                    b2[k] = d2[k]
+                best_a, best_b = ka, kb
+        if best == INF:
+            continue
+        h = new_hypothesis(found)
+        for k in range(3):
+            h.d1[k] = b1[k]
+            h.d2[k] = b2[k]
+        h.lam3 = best
+        h.edge = chain[4]
+        h.legs[0], h.legs[1] = best_a, best_b
+        h.nlegs = 2
+        h.points[0], h.points[1], h.points[2], h.points[3] = chain[:4]
+        h.npoints = 2
+
+
+cdef Py_ssize_t root(Py_ssize_t* parent, Py_ssize_t i) noexcept nogil:
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+cdef list group_by_ovps(Hypotheses* found, double merge_deg):
+    """Union-find over hypotheses whose OVP sets agree within ``merge_deg``; groups in
+    order of their first member."""
+    cdef Py_ssize_t n = found.count, i, j
+    cdef Py_ssize_t* parent = <Py_ssize_t*>malloc(n * sizeof(Py_ssize_t))
+    cdef Hypothesis* a
+    cdef Hypothesis* b
+    cdef double same, cross_
+    for i in range(n):
+        parent[i] = i
+    for i in range(n):
+        for j in range(i + 1, n):
+            a, b = &found.items[i], &found.items[j]
+            same = max(angle_between_deg(a.d1, b.d1), angle_between_deg(a.d2, b.d2))
+            cross_ = max(angle_between_deg(a.d1, b.d2), angle_between_deg(a.d2, b.d1))
+            if min(same, cross_) <= merge_deg:
+                parent[root(parent, i)] = root(parent, j)
+    groups = {}
+    for i in range(n):
+        groups.setdefault(root(parent, i), []).append(i)
+    free(parent)
+    return list(groups.values())
+
+
+cdef void refit_ovp(double[:, ::1] s, double[:, ::1] lines, list legs, const double* ref_px,
+                    double max_angle_deg, double* out) noexcept:
+    """An OVP refit on the legs pointing at ``ref_px`` within ``max_angle_deg``: least
+    squares on endpoint residuals, as for the layout VPs (two passes); ``ref_px`` itself
+    when fewer than two legs point at it."""
+    cdef double a[9]
+    cdef double vp[3]
+    cdef double w, t, l, n
+    cdef Py_ssize_t it, k, i, count = 0
+    mine = []
+    for i in legs:
+        if vp_angle_deg(vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], ref_px)) <= max_angle_deg:
+            mine.append(i)
+    out[0], out[1], out[2] = ref_px[0], ref_px[1], ref_px[2]
+    if len(mine) < 2:
+        return
+    vp[0], vp[1], vp[2] = ref_px[0], ref_px[1], ref_px[2]
+    for it in range(2):
+        for k in range(9):
+            a[k] = 0.0
+        n = norm3(vp)
+        for i in mine:
+            t = hypot(vp[0] / n - vp[2] / n * (0.5 * (s[i, 0] + s[i, 2])),
+                      vp[1] / n - vp[2] / n * (0.5 * (s[i, 1] + s[i, 3])))
+            l = hypot(s[i, 2] - s[i, 0], s[i, 3] - s[i, 1])
+            w = (l / (t if t > 1e-12 else 1e-12)) ** 2
+            for k in range(9):
+                a[k] += w * lines[i, k // 3] * lines[i, k % 3]
+        smallest_eigenvector(a, vp)
+    if vp[2] < 0:
+        vp[0], vp[1], vp[2] = -vp[0], -vp[1], -vp[2]
+    out[0], out[1], out[2] = vp[0], vp[1], vp[2]
+
+
+cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
+                    list members, Hypotheses* found, double[:, ::1] pc, long long[::1] cs,
+                    long long[::1] cn, const double* v3_px):
+    """One obstacle from a group of hypotheses: OVPs refit on all legs, member corners
+    joined. Returns (ovps 3×3, corners_px K×2, pairs, height_px, λ3)."""
+    cdef Hypothesis* first = &found.items[<Py_ssize_t>members[0]]
+    cdef Hypothesis* h
+    cdef double ref1[3]
+    cdef double ref2[3]
+    cdef double o1[3]
+    cdef double o2[3]
+    cdef double e1[3]
+    cdef double e2[3]
+    cdef double fit_h, fit_o, ref_h, ref_o, a_s, b_s, a_n, b_n, height = 0.0, lam3 = INF
+    cdef Py_ssize_t k, m, i
+    point_of(fr, first.d1, ref1)
+    point_of(fr, first.d2, ref2)
+    paired = set()
+    legs = set()
+    extra_points = []
+    for m in members:
+        h = &found.items[m]
+        if h.corner >= 0:
+            paired.add(h.corner)
+            legs.add(cs[h.corner])
+            legs.add(cn[h.corner])
+        for k in range(h.nlegs):
+            legs.add(h.legs[k])
+        for k in range(h.npoints):
+            extra_points.append((h.points[2 * k], h.points[2 * k + 1]))
+        height = h.edge if h.edge > height else height
+        lam3 = h.lam3 if h.lam3 < lam3 else lam3
+    paired = sorted(paired)
+    legs = sorted(legs)
+    # Refit each OVP on the horizontal legs of the paired corners that point at it.
+    cdef double refit_deg = max(p.member_angle_deg * 3, 6.0)
+    refit_ovp(s, lines, legs, ref1, refit_deg, o1)
+    refit_ovp(s, lines, legs, ref2, refit_deg, o2)
+    # Legs that are nearly parallel in the image fix their OVP poorly: a refit that breaks
+    # the box model (λ3, eq. 8) is noise, not a better estimate, so keep the pair's OVPs.
+    direction_of(fr, o1, e1)
+    direction_of(fr, o2, e2)
+    ovp_error(fr, e1, e2, &fit_h, &fit_o)
+    ovp_error(fr, first.d1, first.d2, &ref_h, &ref_o)
+    if fit_h > ref_h + p.refit_slack_deg or fit_o > ref_o + p.refit_slack_deg:
+        for k in range(3):
+            o1[k] = ref1[k]
+            o2[k] = ref2[k]
+    # Further Table-I corners whose legs point at O1 and O2 join the obstacle (λ3).
+    joined = list(paired)
+    if paired:
+        paired_set = set(paired)
+        for k in range(cs.shape[0]):
+            if k in paired_set:
+                continue
+            i = cs[k]
+            a_s = vp_angle_deg(vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o1))
+            b_s = vp_angle_deg(vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o2))
+            i = cn[k]
+            b_n = vp_angle_deg(vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o1))
+            a_n = vp_angle_deg(vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o2))
+            if min(max(a_s, a_n), max(b_s, b_n)) <= p.member_angle_deg:
+                joined.append(k)
+    points = []
+    for x, y in [(pc[k, 0], pc[k, 1]) for k in joined] + extra_points:
+        if all(hypot(x - kx, y - ky) > 3.0 for kx, ky in points):
+            points.append((x, y))
+    ovps = np.array([[o1[0], o1[1], o1[2]], [o2[0], o2[1], o2[2]],
+                     [v3_px[0], v3_px[1], v3_px[2]]])
+    return ovps, np.array(points, dtype=float).reshape(-1, 2), len(members), height, lam3
+
+
+def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
+         double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
+         double radius_px, double leg_gap_frac):
+    """Obstacles from Table-I corners and vertical edges (see
+    :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
+    corners_px K×2, pairs, height_px, λ3)."""
+    cdef Params p
+    p.collinear_px = params.collinear_px
+    p.min_edge_px = params.min_edge_px
+    p.horizon_tol_deg = params.horizon_tol_deg
+    p.orthogonal_tol_deg = params.orthogonal_tol_deg
+    p.single_corner_orthogonal_tol_deg = params.single_corner_orthogonal_tol_deg
+    p.non_manhattan_min_deg = params.non_manhattan_min_deg
+    p.merge_deg = params.merge_deg
+    p.member_angle_deg = params.member_angle_deg
+    p.refit_slack_deg = params.refit_slack_deg
+    p.radius_px = radius_px
+    p.leg_gap_frac = leg_gap_frac
+    cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
+    cdef Py_ssize_t n = s.shape[0], i, k, g, nh
+    if n == 0:
+        return []
+    cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
+    cdef double[:, ::1] lines = np.empty((n, 3))
+    cdef double[::1] lengths = np.empty(n)
+    for i in range(n):
+        segment_line(s[i, 0], s[i, 1], s[i, 2], s[i, 3], &lines[i, 0])
+        lengths[i] = hypot(s[i, 2] - s[i, 0], s[i, 3] - s[i, 1])
+    cdef Frame fr
+    fr.f, fr.cx, fr.cy = focal, cx, cy
+    direction_of(&fr, &vps[2, 0], fr.d3)
+    direction_of(&fr, &vps[0, 0], fr.l1)
+    direction_of(&fr, &vps[1, 0], fr.l2)
+    # The horizon: the image line of all directions ⟂ V3, scaled to pixel distances.
+    fr.horizon[0] = fr.d3[0] / focal
+    fr.horizon[1] = fr.d3[1] / focal
+    fr.horizon[2] = fr.d3[2] - (cx * fr.d3[0] + cy * fr.d3[1]) / focal
+    cdef double hn = hypot(fr.horizon[0], fr.horizon[1])
+    if hn > 0:
+        fr.horizon[0] /= hn
+        fr.horizon[1] /= hn
+        fr.horizon[2] /= hn
+    else:
+        fr.horizon[0], fr.horizon[1], fr.horizon[2] = 0.0, 0.0, 1.0
+    lab = np.asarray(labels)
+    cdef Py_ssize_t[::1] verticals = np.flatnonzero(lab == vertical_label)
+    cdef Py_ssize_t[::1] free_idx = np.flatnonzero(free_legs)
+    cdef double[:, ::1] pc = np.ascontiguousarray(corner_points, dtype=float).reshape(-1, 2)
+    cdef long long[::1] cs = np.ascontiguousarray(corner_s, dtype=np.int64)
+    cdef long long[::1] cn = np.ascontiguousarray(corner_n, dtype=np.int64)
+    cdef long long[::1] cr = np.ascontiguousarray(corner_r, dtype=np.int64)
+    cdef Py_ssize_t nc = pc.shape[0]
+
+    cdef Hypotheses found
+    found.items = NULL
+    found.count = found.cap = 0
+    cdef Hypotheses halves
+    halves.items = NULL
+    halves.count = halves.cap = 0
+    cdef double[:, ::1] far = np.empty((max(nc, 1), 2))
+    cdef double[::1] reach = np.empty(max(nc, 1))
+    cdef unsigned char[::1] usable = np.zeros(max(nc, 1), np.uint8)
+    cdef Py_ssize_t* partners = <Py_ssize_t*>malloc(max(free_idx.shape[0], 1) * sizeof(Py_ssize_t))
+    cdef double d1[3]
+    cdef double d2[3]
+    cdef double lam3
+    cdef Hypothesis* h
+    try:
+        if nc and verticals.shape[0]:
+            # Pairs (eqs. 5–8): each Table-I corner's vertical edge followed to its other
+            # end (eqs. 6, 7), where the non-Manhattan legs form C_h.
+            far_ends(s, lines, pc, cr, verticals, &p, far, reach, usable)
+            for g in range(nc):
+                if not usable[g]:
+                    continue
+                nh = partner_legs(s, lines, pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
+                                  reach[g], cs[g], cn[g], free_idx, &p, partners)
+                if partner_ovps(&fr, &p, lines, cs[g], cn[g], partners, nh, d1, d2, &lam3):
+                    pass
+                elif reach[g] >= 2 * p.min_edge_px and horizon_ovps(
+                        &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3):
+                    pass  # C_h has no visible leg at all: both OVPs on the horizon
+                else:
+                    continue
+                h = new_hypothesis(&found)
+                for k in range(3):
+                    h.d1[k] = d1[k]
+                    h.d2[k] = d2[k]
+                h.lam3 = lam3
+                h.edge = reach[g]
+                h.corner = g
+        # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
+        edges = edge_legs(s, lengths, lines, verticals, free_idx, &p)
+        silhouette_halves(&fr, &p, lines, edges, &halves)
+        pair_halves(&fr, &p, &halves, &found)
+        if found.count == 0:
+            edge_horizon_pairs(&fr, &p, lines, edges, &found)
+        if found.count == 0:
+            return []
+        obstacles = []
+        for members in group_by_ovps(&found, p.merge_deg):
+            obstacles.append(obstacle(&fr, &p, s, lines, members, &found, pc, cs, cn, &vps[2, 0]))
+        return obstacles
+    finally:
+        free(found.items)
+        free(halves.items)
+        free(partners)

@@ -1,0 +1,518 @@
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+"""Compiled loops of the layout-VP stage; the method is described in
+:mod:`companion.vision.vanishing` (paper Fig. 2), which calls :func:`layout_directions`
+and :func:`assign`.
+
+Segments come in normalised camera coordinates (``(pixel − centre) / focal``), so a VP is
+a 3-D direction and angles between VPs are angles in space.
+"""
+
+import numpy as np
+
+from libc.math cimport asin, atan2, ceil, cos, exp, fmod, hypot, sin, sqrt
+
+from companion.vision._geometry cimport (
+    angle_between_deg,
+    cross3,
+    degrees,
+    dot3,
+    norm3,
+    segment_line,
+    smallest_eigenvector,
+    unit3,
+    vp_angle_deg,
+    vp_sin,
+)
+
+cdef double DEG2RAD = 0.017453292519943295
+
+
+cdef struct Params:
+    double residual_px
+    double max_angle_deg
+    double sin_max  # sin(max_angle_deg), clipped to 1
+    double vertical_max_tilt_deg
+    int vertical_hypothesis_segments
+    double vertical_max_camera_tilt_deg
+    double histogram_bin_deg
+    double histogram_sigma_deg
+    double peak_min_share
+    int max_horizontal_vps
+    double orthogonal_tol_deg
+    double min_vp_separation_deg
+
+
+cdef Params _params(p):
+    cdef Params q
+    q.residual_px = p.residual_px
+    q.max_angle_deg = p.max_angle_deg
+    q.sin_max = 1.0 if p.max_angle_deg >= 90.0 else sin(p.max_angle_deg * DEG2RAD)
+    q.vertical_max_tilt_deg = p.vertical_max_tilt_deg
+    q.vertical_hypothesis_segments = p.vertical_hypothesis_segments
+    q.vertical_max_camera_tilt_deg = p.vertical_max_camera_tilt_deg
+    q.histogram_bin_deg = p.histogram_bin_deg
+    q.histogram_sigma_deg = p.histogram_sigma_deg
+    q.peak_min_share = p.peak_min_share
+    q.max_horizontal_vps = p.max_horizontal_vps
+    q.orthogonal_tol_deg = p.orthogonal_tol_deg
+    q.min_vp_separation_deg = p.min_vp_separation_deg
+    return q
+
+
+cdef inline double msac_score(const double* s, const double* v, double focal,
+                              Params* p) noexcept nogil:
+    """MSAC's truncated quadratic ``1 − r²`` (r: endpoint residual over ``residual_px``);
+    0 unless the segment passes the inlier test (angle and residual).
+
+    With ``u`` the segment, ``t`` the direction from its midpoint to ``v``, the angle's
+    sine is ``|u × t| / (|u| |t|)`` and the endpoint residual ``|u × t| / (2 |t|)``: both
+    tests and ``r²`` are ratios of squares, so no root, arcsine or second division."""
+    cdef double ux = s[2] - s[0], uy = s[3] - s[1]
+    cdef double tx = v[0] - v[2] * (0.5 * (s[0] + s[2]))
+    cdef double ty = v[1] - v[2] * (0.5 * (s[1] + s[3]))
+    cdef double t2 = tx * tx + ty * ty, u2 = ux * ux + uy * uy
+    cdef double cross = ux * ty - uy * tx
+    cdef double rr
+    if u2 * t2 <= 1e-24:  # no direction to speak of: sin = 1
+        rr = u2 * (focal / (2.0 * p.residual_px)) ** 2
+        return 1.0 - rr if p.sin_max >= 1.0 and rr <= 1.0 else 0.0
+    if cross * cross > p.sin_max * p.sin_max * u2 * t2:
+        return 0.0
+    rr = cross * cross * (focal / (2.0 * p.residual_px)) ** 2 / t2
+    return 1.0 - rr if rr <= 1.0 else 0.0
+
+
+cdef inline bint is_inlier(const double* s, const double* v, double focal,
+                           Params* p) noexcept nogil:
+    """The inlier test of :func:`msac_score`: angle and endpoint residual within bounds."""
+    cdef double ux = s[2] - s[0], uy = s[3] - s[1]
+    cdef double tx = v[0] - v[2] * (0.5 * (s[0] + s[2]))
+    cdef double ty = v[1] - v[2] * (0.5 * (s[1] + s[3]))
+    cdef double t2 = tx * tx + ty * ty, u2 = ux * ux + uy * uy
+    cdef double cross = ux * ty - uy * tx
+    cdef double k2 = (focal / (2.0 * p.residual_px)) ** 2
+    if u2 * t2 <= 1e-24:
+        return p.sin_max >= 1.0 and u2 * k2 <= 1.0
+    return cross * cross <= p.sin_max * p.sin_max * u2 * t2 and cross * cross * k2 <= t2
+
+
+cdef inline double endpoint_weight(const double* s, const double* v) noexcept nogil:
+    """``(L / |t|)²`` for one segment, ``t`` from its midpoint to the unit ``v``: the weight
+    that turns the algebraic residual ``l·v`` of a VP fit into endpoint residuals."""
+    cdef double v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    cdef double tx = v[0] - v[2] * (0.5 * (s[0] + s[2]))
+    cdef double ty = v[1] - v[2] * (0.5 * (s[1] + s[3]))
+    cdef double t2 = tx * tx + ty * ty
+    if t2 < 1e-24 * v2:
+        t2 = 1e-24 * v2
+    return ((s[2] - s[0]) * (s[2] - s[0]) + (s[3] - s[1]) * (s[3] - s[1])) * v2 / t2
+
+
+cdef bint refine(double[:, ::1] ns, double[:, ::1] lines, const unsigned char* use,
+                 double focal, Params* p, double* vp) noexcept nogil:
+    """One least-squares step: the unit v minimising Σ w (l·v)² with w the MSAC score
+    times the endpoint weight of each usable segment. False (``vp`` untouched) when fewer
+    than two segments carry weight."""
+    cdef double a[9]
+    cdef double w
+    cdef Py_ssize_t i
+    cdef int k, count = 0
+    for k in range(9):
+        a[k] = 0.0
+    for i in range(ns.shape[0]):
+        if not use[i]:
+            continue
+        w = msac_score(&ns[i, 0], vp, focal, p)
+        if w == 0.0:
+            continue
+        w = w * endpoint_weight(&ns[i, 0], vp)
+        if w == 0.0:
+            continue
+        count += 1
+        for k in range(9):
+            a[k] += w * lines[i, k // 3] * lines[i, k % 3]
+    if count < 2:
+        return False
+    smallest_eigenvector(a, vp)
+    return True
+
+
+cdef bint vertical_vp(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengths,
+                      double focal, Params* p, double* best, unsigned char[::1] inl):
+    """V3: pairs of the longest near-vertical segments as hypotheses (and straight down),
+    scored MSAC-style, the best refined twice; ``inl`` its inliers. False: the default."""
+    cdef Py_ssize_t n = ns.shape[0], i, j, k, c, h
+    cdef double min_cos = cos(p.vertical_max_camera_tilt_deg * DEG2RAD)
+    cdef double sin_max = sin(p.max_angle_deg * DEG2RAD)  # see the note in the scoring
+    cdef unsigned char[::1] is_cand = np.zeros(n, np.uint8)
+    cdef Py_ssize_t[::1] cand = np.empty(n, np.intp)
+    cdef Py_ssize_t ncand = 0, ntop, tmp
+    for i in range(n):
+        inl[i] = 0
+        if degrees(atan2(abs(ns[i, 2] - ns[i, 0]), abs(ns[i, 3] - ns[i, 1]))) \
+                <= p.vertical_max_tilt_deg:
+            cand[ncand] = i
+            ncand += 1
+            is_cand[i] = 1
+    best[0] = 0.0
+    best[1] = 1.0
+    best[2] = 0.0
+    if ncand < 2:
+        return False
+    # The longest candidates, by length then index (a stable sort).
+    cdef Py_ssize_t[::1] top = np.empty(ncand, np.intp)
+    for i in range(ncand):
+        top[i] = cand[i]
+        j = i
+        while j > 0 and lengths[top[j]] > lengths[top[j - 1]]:
+            tmp = top[j]
+            top[j] = top[j - 1]
+            top[j - 1] = tmp
+            j -= 1
+    ntop = min(ncand, <Py_ssize_t>p.vertical_hypothesis_segments)
+    cdef double[:, ::1] hyps = np.empty((1 + ntop * (ntop - 1) // 2, 3))
+    cdef Py_ssize_t nh = 0
+    cdef double hv[3]
+    cdef double nrm
+    hyps[0, 0] = 0.0
+    hyps[0, 1] = 1.0
+    hyps[0, 2] = 0.0
+    nh = 1
+    for i in range(ntop):
+        for j in range(i + 1, ntop):
+            cross3(&lines[top[i], 0], &lines[top[j], 0], hv)
+            nrm = norm3(hv)
+            if nrm <= 1e-12:
+                continue
+            hv[0] /= nrm
+            hv[1] /= nrm
+            hv[2] /= nrm
+            # The camera is never pitched or rolled this far: V3 lies near the image's
+            # y axis. Converging floor lines must not pass for verticals.
+            if abs(hv[1]) < min_cos:
+                continue
+            hyps[nh, 0] = hv[0]
+            hyps[nh, 1] = hv[1]
+            hyps[nh, 2] = hv[2]
+            nh += 1
+    # Score every hypothesis against every candidate. With midpoint m and direction u of a
+    # candidate and h = (x, y, w) a hypothesis, the direction from m to h is t = (x, y) − w·m;
+    # u × t and |t|² are linear in products of h's entries, so each candidate's and each
+    # hypothesis's factors are computed once, and the tests compare squares.
+    cdef double[:, ::1] cf = np.empty((ncand, 7))
+    cdef double cl, mx, my, ux, uy, cross, t2, r2, score, best_score = -1.0
+    cdef double h0, h1, h2, hh, hw0, hw1, ww, sin2 = sin_max * sin_max
+    cdef Py_ssize_t best_h = 0
+    cdef double scale = focal / (2.0 * p.residual_px)
+    for c in range(ncand):
+        i = cand[c]
+        cl = lengths[i]
+        mx = 0.5 * (ns[i, 0] + ns[i, 2])
+        my = 0.5 * (ns[i, 1] + ns[i, 3])
+        ux = (ns[i, 2] - ns[i, 0]) / cl
+        uy = (ns[i, 3] - ns[i, 1]) / cl
+        cf[c, 0] = -uy
+        cf[c, 1] = ux
+        cf[c, 2] = uy * mx - ux * my
+        cf[c, 3] = mx
+        cf[c, 4] = my
+        cf[c, 5] = (cl * scale) * (cl * scale)
+        cf[c, 6] = cl
+    for h in range(nh):
+        h0, h1, h2 = hyps[h, 0], hyps[h, 1], hyps[h, 2]
+        hh = h0 * h0 + h1 * h1
+        hw0 = 2.0 * h0 * h2
+        hw1 = 2.0 * h1 * h2
+        ww = h2 * h2
+        score = 0.0
+        for c in range(ncand):
+            cross = h0 * cf[c, 0] + h1 * cf[c, 1] + h2 * cf[c, 2]
+            cross = cross * cross
+            t2 = hh - hw0 * cf[c, 3] - hw1 * cf[c, 4] + ww * (cf[c, 3] * cf[c, 3] + cf[c, 4] * cf[c, 4])
+            if t2 <= 1e-30:
+                r2 = cf[c, 5]  # t ≈ 0: sin taken as 1
+                if r2 <= 1.0 and sin_max >= 1.0:
+                    score += cf[c, 6] * (1.0 - r2)
+                continue
+            # r = sin · l · scale ≤ 1 and sin ≤ sin_max, with sin² = cross² / |t|².
+            r2 = cross * cf[c, 5]
+            if r2 <= t2 and cross <= sin2 * t2:
+                score += cf[c, 6] * (1.0 - r2 / t2)
+        if score > best_score:
+            best_score = score
+            best_h = h
+    for k in range(3):
+        best[k] = hyps[best_h, k]
+    for k in range(2):
+        if not refine(ns, lines, &is_cand[0], focal, p, best):
+            break
+    cdef Py_ssize_t count = 0
+    for i in range(n):
+        if is_cand[i] and is_inlier(&ns[i, 0], best, focal, p):
+            inl[i] = 1
+            count += 1
+    if count < 2 or abs(best[1]) / norm3(best) < min_cos:
+        for i in range(n):
+            inl[i] = 0
+        best[0] = 0.0
+        best[1] = 1.0
+        best[2] = 0.0
+        return False
+    if best[1] < 0 or (best[1] == 0 and best[2] < 0):
+        for k in range(3):
+            best[k] = -best[k]
+    return True
+
+
+cdef int histogram_peaks(double[::1] theta, double[::1] weights, unsigned char[::1] use,
+                         Params* p, double[::1] peaks):
+    """Azimuths (degrees) of the peaks of the length-weighted, Gaussian-smoothed circular
+    histogram of ``theta``, highest first, at most ``len(peaks)``; returns their count."""
+    cdef int nbins = <int>(180.0 / p.histogram_bin_deg + 0.5)
+    cdef int half = <int>ceil(3 * p.histogram_sigma_deg / p.histogram_bin_deg)
+    cdef double[::1] hist = np.zeros(nbins)
+    cdef double[::1] smooth = np.zeros(nbins)
+    cdef double[::1] kern = np.empty(2 * half + 1)
+    cdef Py_ssize_t i, m, b
+    cdef double ksum = 0.0, total = 0.0, x
+    for i in range(theta.shape[0]):
+        if use[i]:
+            b = (<Py_ssize_t>(theta[i] / p.histogram_bin_deg)) % nbins
+            hist[b] += weights[i]
+    for m in range(2 * half + 1):
+        x = (m - half) * p.histogram_bin_deg / p.histogram_sigma_deg
+        kern[m] = exp(-0.5 * x * x)
+        ksum += kern[m]
+    for i in range(nbins):
+        x = 0.0
+        for m in range(2 * half + 1):
+            x += hist[(i + m - half + nbins) % nbins] * kern[m]
+        smooth[i] = x
+        total += x
+    if total <= 0:
+        return 0
+    cdef double floor_ = p.peak_min_share * total / ksum
+    cdef Py_ssize_t[::1] idx = np.empty(nbins, np.intp)
+    cdef Py_ssize_t npk = 0, j, tmp
+    for i in range(nbins):
+        x = smooth[i]
+        if x >= smooth[(i - 1 + nbins) % nbins] and x > smooth[(i + 1) % nbins] and x >= floor_:
+            idx[npk] = i
+            j = npk
+            npk += 1
+            while j > 0 and smooth[idx[j]] > smooth[idx[j - 1]]:
+                tmp = idx[j]
+                idx[j] = idx[j - 1]
+                idx[j - 1] = tmp
+                j -= 1
+    npk = min(npk, peaks.shape[0])
+    for i in range(npk):
+        peaks[i] = (idx[i] + 0.5) * p.histogram_bin_deg
+    return <int>npk
+
+
+def layout_vps(segments_px, double cx, double cy, double focal, params):
+    """The layout VPs of ``segments_px`` (N×4 pixels) for a pinhole with principal point
+    ``(cx, cy)`` and ``focal`` pixels.
+
+    Returns ``(vps 3×3, observed (v1, v2, v3), supports 3, others K×3, others_support K)``:
+    rows V1 (LMVP), V2, V3 and the further horizontal VPs as unit homogeneous pixel points.
+    """
+    cdef Params p = _params(params)
+    cdef double[:, ::1] s = np.ascontiguousarray(segments_px, dtype=float).reshape(-1, 4)
+    cdef Py_ssize_t n = s.shape[0], i, k, j, ci
+    cdef double[:, ::1] ns = np.empty((n, 4))
+    cdef double[:, ::1] lines = np.empty((n, 3))
+    cdef double[::1] lengths = np.empty(n)
+    for i in range(n):
+        ns[i, 0] = (s[i, 0] - cx) / focal
+        ns[i, 1] = (s[i, 1] - cy) / focal
+        ns[i, 2] = (s[i, 2] - cx) / focal
+        ns[i, 3] = (s[i, 3] - cy) / focal
+        segment_line(ns[i, 0], ns[i, 1], ns[i, 2], ns[i, 3], &lines[i, 0])
+        lengths[i] = hypot(s[i, 2] - s[i, 0], s[i, 3] - s[i, 1])
+
+    inliers = np.zeros(n, np.uint8)
+    cdef unsigned char[::1] v3_inl = inliers
+    cdef double v3[3]
+    cdef bint v3_ok = vertical_vp(ns, lines, lengths, focal, &p, v3, v3_inl)
+
+    # Horizontal VPs: each non-vertical line crosses the horizon at the azimuth θ of the
+    # direction it would have if it were a horizontal edge.
+    cdef double d3[3]
+    cdef double e1[3]
+    cdef double e2[3]
+    cdef double pt[3]
+    for k in range(3):
+        d3[k] = v3[k]
+    unit3(d3)
+    e1[0] = 1.0 - d3[0] * d3[0]
+    e1[1] = -d3[0] * d3[1]
+    e1[2] = -d3[0] * d3[2]
+    unit3(e1)
+    cross3(e1, d3, e2)
+    if e2[2] < 0:
+        for k in range(3):
+            e2[k] = -e2[k]
+    cdef double[::1] theta = np.empty(n)
+    cdef unsigned char[::1] use = np.zeros(n, np.uint8)
+    cdef unsigned char[::1] rest = np.zeros(n, np.uint8)
+    for i in range(n):
+        rest[i] = not v3_inl[i]
+        cross3(&lines[i, 0], v3, pt)
+        theta[i] = fmod(degrees(atan2(dot3(pt, e1), dot3(pt, e2))), 180.0)
+        if theta[i] < 0:
+            theta[i] += 180.0
+        use[i] = rest[i] and norm3(pt) > 1e-9
+    cdef double[::1] peaks = np.empty(2 * p.max_horizontal_vps)
+    cdef int npk = histogram_peaks(theta, lengths, use, &p, peaks)
+
+    # Each peak refined (twice) without the horizon constraint, then scored.
+    cdef double[:, ::1] pv = np.empty((max(npk, 1), 3))
+    cdef double[::1] support = np.zeros(max(npk, 1))
+    cdef double t
+    for k in range(npk):
+        t = peaks[k] * DEG2RAD
+        for j in range(3):
+            pv[k, j] = sin(t) * e1[j] + cos(t) * e2[j]
+        for j in range(2):
+            refine(ns, lines, &rest[0], focal, &p, &pv[k, 0])
+        for i in range(n):
+            if rest[i]:
+                support[k] += lengths[i] * msac_score(&ns[i, 0], &pv[k, 0], focal, &p)
+
+    # Candidates in order of peak height: distinct, and not the vertical VP.
+    cands = []
+    for k in range(npk):
+        if support[k] <= 0:
+            continue
+        if pv[k, 2] < 0:
+            for j in range(3):
+                pv[k, j] = -pv[k, j]
+        duplicate = False
+        for c, _ in cands:
+            ci = c
+            if angle_between_deg(&pv[k, 0], &pv[ci, 0]) < p.min_vp_separation_deg:
+                duplicate = True
+                break
+        if duplicate:
+            continue
+        if angle_between_deg(&pv[k, 0], v3) < 45.0:
+            continue
+        cands.append((k, support[k]))
+        if len(cands) >= p.max_horizontal_vps:
+            break
+
+    dirs = np.empty((3, 3))
+    cdef double[:, ::1] d = dirs
+    for j in range(3):
+        d[2, j] = v3[j]
+    observed_v1 = observed_v2 = False
+    s1 = s2 = 0.0
+    others = []
+    if not cands:
+        for j in range(3):  # azimuths 90° and 0°: image right and forward
+            d[0, j] = e1[j] * sin(90.0 * DEG2RAD) + e2[j] * cos(90.0 * DEG2RAD)
+            d[1, j] = e2[j]
+    else:
+        first, second, v2_seen, others = _choose_layout(cands, pv, d3, &p)
+        k = first[0]
+        for j in range(3):
+            d[0, j] = pv[k, j]
+        s1 = first[1]
+        observed_v1 = True
+        observed_v2 = v2_seen
+        if v2_seen:
+            k = second[0]
+            for j in range(3):
+                d[1, j] = pv[k, j]
+            s2 = second[1]
+        else:
+            cross3(d3, &pv[first[0], 0], pt)
+            unit3(pt)
+            if pt[2] < 0:
+                for j in range(3):
+                    pt[j] = -pt[j]
+            for j in range(3):
+                d[1, j] = pt[j]
+    v3_support = 0.0
+    for i in range(n):
+        if v3_inl[i]:
+            v3_support += lengths[i]
+    for i in range(3):
+        to_pixels(&d[i, 0], cx, cy, focal)
+    other_vps = np.empty((len(others), 3))
+    cdef double[:, ::1] o = other_vps
+    for i, (k, _) in enumerate(others):
+        for j in range(3):
+            o[i, j] = pv[k, j]
+        to_pixels(&o[i, 0], cx, cy, focal)
+    return (dirs, (observed_v1, observed_v2, bool(v3_ok)), np.array([s1, s2, v3_support]),
+            other_vps, np.array([w for _, w in others], dtype=float))
+
+
+cdef inline void to_pixels(double* d, double cx, double cy, double focal) noexcept nogil:
+    """A 3-D direction, in place, as its unit homogeneous pixel point ``K d``."""
+    d[0] = focal * d[0] + cx * d[2]
+    d[1] = focal * d[1] + cy * d[2]
+    unit3(d)
+
+
+cdef _choose_layout(list cands, double[:, ::1] pv, double* d3, Params* p):
+    """Best-supported (near-)orthogonal pair of horizontal VPs; the rest are 'others'.
+    Returns (V1 (row, support), V2 (row, support), whether V2 was seen, others)."""
+    cdef Py_ssize_t i, j, a, b, top = 0
+    cdef double best_score = -1.0
+    best = None
+    for i in range(len(cands)):
+        for j in range(i + 1, len(cands)):
+            a, b = cands[i][0], cands[j][0]
+            if abs(90.0 - angle_between_deg(&pv[a, 0], &pv[b, 0])) > p.orthogonal_tol_deg:
+                continue
+            if cands[i][1] + cands[j][1] > best_score:
+                best, best_score = (i, j), cands[i][1] + cands[j][1]
+    for i in range(1, len(cands)):
+        if cands[i][1] > cands[top][1]:
+            top = i
+    if best is None or cands[top][1] > best_score:
+        # Only one axis seen well: V2 is inferred ⟂ V1 on the horizon.
+        return cands[top], None, False, [c for k, c in enumerate(cands) if k != top]
+    i, j = best
+    first, second = (i, j) if cands[i][1] >= cands[j][1] else (j, i)
+    return cands[first], cands[second], True, [c for k, c in enumerate(cands) if k not in best]
+
+
+def assign(segments, vps, double max_angle_deg, double residual_px):
+    """Each segment's label: the index of the most consistent of the K homogeneous points
+    ``vps`` (K×3) that passes both thresholds (the angle between the segment and the
+    direction from its midpoint to the point, and how far its ends stray from that line),
+    or −1; and its angle to that point (to the first point when none passes). Inputs in
+    one coordinate frame (pixels)."""
+    cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
+    cdef double[:, ::1] v = np.ascontiguousarray(vps, dtype=float).reshape(-1, 3)
+    cdef Py_ssize_t n = s.shape[0], i, k
+    labels_arr = np.full(n, -1, dtype=np.int64)
+    angles_arr = np.empty(n)
+    cdef long long[::1] labels = labels_arr
+    cdef double[::1] angles = angles_arr
+    cdef double sin_max = 1.0 if max_angle_deg >= 90.0 else sin(max_angle_deg * DEG2RAD)
+    cdef double ux, uy, tx, ty, u2, t2, cross, s2, best_s2
+    for i in range(n):
+        ux, uy = s[i, 2] - s[i, 0], s[i, 3] - s[i, 1]
+        u2 = ux * ux + uy * uy
+        best_s2 = 2.0
+        for k in range(v.shape[0]):
+            tx = v[k, 0] - v[k, 2] * (0.5 * (s[i, 0] + s[i, 2]))
+            ty = v[k, 1] - v[k, 2] * (0.5 * (s[i, 1] + s[i, 3]))
+            t2 = tx * tx + ty * ty
+            cross = ux * ty - uy * tx
+            # sin² of the angle; the endpoint residual is |sin| · length / 2.
+            s2 = 1.0 if u2 * t2 <= 1e-24 else min(cross * cross / (u2 * t2), 1.0)
+            if s2 <= sin_max * sin_max and s2 * u2 <= 4.0 * residual_px * residual_px \
+                    and s2 < best_s2:
+                best_s2 = s2
+                labels[i] = k
+        angles[i] = degrees(asin(sqrt(best_s2))) if labels[i] >= 0 else (
+            vp_angle_deg(vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], &v[0, 0]))
+            if v.shape[0] else 90.0)
+    return labels_arr, angles_arr
