@@ -13,6 +13,7 @@ Sign: η > 0 ⇔ M right of the centre ⇔ turn right (positive yaw rate, body F
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,14 +35,13 @@ def closest_to_centre(vps: np.ndarray, centre: np.ndarray) -> int:
 
     Points at infinity are infinitely far; compared without dividing by ``w``.
     """
-    v = np.atleast_2d(np.asarray(vps, dtype=float))
-    offset = np.linalg.norm(v[:, :2] - v[:, 2:3] * centre[None, :], axis=1)
-    w = np.abs(v[:, 2])
-    # distance = offset / |w|; compare offset_i · |w_j| without forming the ratio.
-    best = 0
-    for k in range(1, len(v)):
-        if offset[k] * w[best] < offset[best] * w[k]:
-            best = k
+    cx, cy = float(centre[0]), float(centre[1])
+    best = best_offset = best_w = None
+    for k, (x, y, w) in enumerate(np.atleast_2d(vps).tolist()):
+        offset = math.hypot(x - w * cx, y - w * cy)
+        # distance = offset / |w|; compare offset_k · |w_best| without forming the ratio.
+        if best is None or offset * best_w < best_offset * abs(w):
+            best, best_offset, best_w = k, offset, abs(w)
     return best
 
 
@@ -51,12 +51,12 @@ def heading_from_vp(vp: np.ndarray, centre: np.ndarray, depth_px: float) -> Head
     Inputs: ``vp`` 3-vector; ``centre`` the image centre in pixels; ``depth_px`` = D.
     For a VP at infinity η and φ are the limits (±90° for a horizontal direction).
     """
-    v = np.asarray(vp, dtype=float)
-    sign = 1.0 if v[2] >= 0 else -1.0
-    x, y, w = sign * v[0], sign * v[1], sign * v[2]
-    mx = x - w * centre[0]  # M_x · w
-    my = -(y - w * centre[1])  # M_y · w, y up
-    eta = np.degrees(np.arctan2(mx, w * depth_px))
-    phi = np.degrees(np.arctan2(my, np.hypot(w * depth_px, mx)))
-    m = (float(mx / w), float(my / w)) if w > 1e-12 else None
-    return Heading(float(eta), float(phi), m)
+    x, y, w = (float(c) for c in vp)
+    if w < 0:
+        x, y, w = -x, -y, -w
+    mx = x - w * float(centre[0])  # M_x · w
+    my = -(y - w * float(centre[1]))  # M_y · w, y up
+    eta = math.degrees(math.atan2(mx, w * depth_px))
+    phi = math.degrees(math.atan2(my, math.hypot(w * depth_px, mx)))
+    m = (mx / w, my / w) if w > 1e-12 else None
+    return Heading(eta, phi, m)
