@@ -64,7 +64,8 @@ def _stats(values: list[float]) -> dict[str, float]:
 
 def _time_resolution(video: str, focal_px: float | None, repeat: int,
                      config: Config) -> dict:
-    """Child process: decode + pipeline + detector alone + LSD alone on every frame."""
+    """Child process: decode, then the pipeline, the detector alone and LSD alone on every
+    frame (grey image in, segments out for the two detectors)."""
     cfg = replace(config, camera=replace(config.camera, focal_px=focal_px))
     pipeline = Pipeline(cfg)
     rows: dict[str, list[float]] = {k: [] for k in ("decode", *STAGES, "total",
@@ -75,6 +76,9 @@ def _time_resolution(video: str, focal_px: float | None, repeat: int,
     cap.release()
     if ok:  # first-call costs (allocations, lazy imports) are not per-frame costs
         pipeline(first)
+        detector, _ = pipeline.detector_for(first.shape[1], first.shape[0])
+        lsd = make_detector("lsd", 0.0)
+    runs = 0
     for _ in range(repeat):
         cap = cv2.VideoCapture(video)
         while True:
@@ -83,25 +87,24 @@ def _time_resolution(video: str, focal_px: float | None, repeat: int,
             t1 = time.perf_counter()
             if not ok:
                 break
-            est = pipeline(frame)
             rows["decode"].append((t1 - t0) * 1e3)
-            for k in STAGES:
-                rows[k].append(est.stage_ms[k])
-            rows["total"].append(est.latency_ms)
-            rows["segments"].append(float(len(est.segments)))
             gray = to_gray(frame)
-            if detector is None:
-                h, w = gray.shape
-                min_len = cfg.vision.min_segment_frac * float(np.hypot(w, h))
-                detector = make_detector(cfg.vision.detector, min_len, cfg.vision.edge_threshold)
-                lsd = make_detector("lsd", min_len)
-            t2 = time.perf_counter()
-            detector(gray)
-            t3 = time.perf_counter()
-            lsd(gray)
-            t4 = time.perf_counter()
-            rows["detector"].append((t3 - t2) * 1e3)
-            rows["lsd"].append((t4 - t3) * 1e3)
+            # The three run in turns, each first on every third frame: whichever runs
+            # right after decoding finds a colder cache (~0.1–0.2 ms at 640×480).
+            for k in range(3):
+                which = (runs + k) % 3
+                if which == 0:
+                    est = pipeline(frame)
+                    for stage in STAGES:
+                        rows[stage].append(est.stage_ms[stage])
+                    rows["total"].append(est.latency_ms)
+                    rows["segments"].append(float(len(est.segments)))
+                else:
+                    t2 = time.perf_counter()
+                    (detector if which == 1 else lsd)(gray)
+                    rows["detector" if which == 1 else "lsd"].append(
+                        (time.perf_counter() - t2) * 1e3)
+            runs += 1
         cap.release()
     out = {k: _stats(v) for k, v in rows.items()}
     out["frames"] = len(rows["total"])
