@@ -1,4 +1,3 @@
-# cython: language_level=3
 """Inline C geometry shared by the compiled stages (``_*.pyx``).
 
 The same quantities as :mod:`companion.vision.geometry`, for one segment or one point at a

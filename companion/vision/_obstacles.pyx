@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Compiled loops of the obstacle stage (eqs. 5–8); the method is described in
 :mod:`companion.vision.obstacles`, which calls :func:`find`. The helpers keep the names of
 the steps described there."""
@@ -178,9 +177,11 @@ cdef void far_ends(double[:, ::1] s, double[:, ::1] lines, double[:, ::1] pc,
             if v != r:
                 lam1 = 0.0
                 for e in range(2):
-                    d = fabs(s[v, 2 * e] * lines[r, 0] + s[v, 2 * e + 1] * lines[r, 1] + lines[r, 2])
+                    d = fabs(s[v, 2 * e] * lines[r, 0] + s[v, 2 * e + 1] * lines[r, 1]
+                             + lines[r, 2])
                     lam1 = d if d > lam1 else lam1
-                    d = fabs(s[r, 2 * e] * lines[v, 0] + s[r, 2 * e + 1] * lines[v, 1] + lines[v, 2])
+                    d = fabs(s[r, 2 * e] * lines[v, 0] + s[r, 2 * e + 1] * lines[v, 1]
+                             + lines[v, 2])
                     lam1 = d if d > lam1 else lam1
                 if lam1 > p.collinear_px:
                     continue

@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Compiled loops of the layout-VP stage; the method is described in
 :mod:`companion.vision.vanishing` (paper Fig. 2), which calls :func:`layout_directions`
 and :func:`assign`.
@@ -228,7 +227,8 @@ cdef bint vertical_vp(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengt
         for c in range(ncand):
             cross = h0 * cf[c, 0] + h1 * cf[c, 1] + h2 * cf[c, 2]
             cross = cross * cross
-            t2 = hh - hw0 * cf[c, 3] - hw1 * cf[c, 4] + ww * (cf[c, 3] * cf[c, 3] + cf[c, 4] * cf[c, 4])
+            t2 = hh - hw0 * cf[c, 3] - hw1 * cf[c, 4] \
+                + ww * (cf[c, 3] * cf[c, 3] + cf[c, 4] * cf[c, 4])
             if t2 <= 1e-30:
                 r2 = cf[c, 5]  # t ≈ 0: sin taken as 1
                 if r2 <= 1.0 and sin_max >= 1.0:
@@ -236,7 +236,7 @@ cdef bint vertical_vp(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengt
                 continue
             # r = sin · l · scale ≤ 1 and sin ≤ sin_max, with sin² = cross² / |t|².
             r2 = cross * cf[c, 5]
-            if r2 <= t2 and cross <= sin2 * t2:
+            if r2 <= t2 and cross * (focal * focal) <= sin2 * t2:
                 score += cf[c, 6] * (1.0 - r2 / t2)
         if score > best_score:
             best_score = score
