@@ -86,3 +86,32 @@ def test_loose_ends_are_those_that_meet_no_other_segment():
                      [200.0, 200.0, 260.0, 200.0]])  # alone
     assert loose_ends(segs, 10.0).tolist() == [[True, False], [False, True], [True, True]]
     assert loose_ends(segs, 4.0).tolist() == [[True, True], [True, True], [True, True]]
+
+
+def test_an_occluding_edge_grows_across_a_change_of_background_and_stops_at_its_corner():
+    # A dark box (columns 160–279, rows 60–199) in front of a wall (180) that meets a
+    # skirting board (70) at row 120 and the floor (110) at row 130. On the left edge of
+    # the box the step across flips size twice as the background changes; the box's
+    # side of the edge stays the same, so the edge goes on to the box's bottom corner.
+    rng = np.random.default_rng(1)
+    frame = np.full((240, 320), 180.0)
+    frame[120:130] = 70.0
+    frame[130:] = 110.0
+    frame[60:200, 160:280] = 40.0
+    frame = np.clip(frame + rng.normal(0.0, 2.0, frame.shape), 0, 255).astype(np.uint8)
+    seg = np.array([[159.5, 70.0, 159.5, 110.0]])
+    out = extend_segments(frame, seg, max_px=100.0, step_px=2.0)
+    assert out[0, 0] == pytest.approx(159.5) and out[0, 2] == pytest.approx(159.5)
+    assert out[0, 1] == pytest.approx(59.5, abs=2.5)  # the top corner, against the wall
+    assert out[0, 3] == pytest.approx(199.5, abs=2.5)  # the bottom corner, on the floor
+
+
+def test_a_room_line_ending_on_an_obstacle_edge_does_not_pin_it():
+    from companion.vision.corners import loose_ends
+
+    segs = np.array([[100.0, 50.0, 100.0, 150.0],    # an obstacle's vertical edge
+                     [102.0, 152.0, 300.0, 152.0]])  # a skirting line hidden behind it
+    assert loose_ends(segs, 10.0).tolist() == [[True, False], [False, True]]
+    # Only the obstacle's edge can make a Table-I corner: the T-junction is not its corner.
+    among = np.array([True, False])
+    assert loose_ends(segs, 10.0, among=among).tolist() == [[True, True], [False, False]]

@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Compiled loops of the corner stage; the method (eqs. 2–4) is described in
 :mod:`companion.vision.corners`, which calls these functions."""
 
@@ -71,24 +70,31 @@ cdef Py_ssize_t close_end_pairs(double[:, ::1] s, const Py_ssize_t* rows, Py_ssi
     return count
 
 
-def loose_ends(segments, double radius_px):
-    """Which segment ends meet no other segment's end within ``radius_px`` (N×2 bool)."""
+def loose_ends(segments, double radius_px, among=None):
+    """Which segment ends meet no other segment's end within ``radius_px`` (N×2 bool);
+    with ``among`` (N bool), only those segments count, and the others are not loose."""
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
-    cdef Py_ssize_t n = s.shape[0], k, count
-    out = np.ones((n, 2), dtype=bool)
+    cdef Py_ssize_t n = s.shape[0], k, count, m = 0
+    out = np.zeros((n, 2), dtype=bool)
     cdef unsigned char[:, ::1] loose = out.view(np.uint8)
+    cdef const unsigned char[::1] use
+    if among is not None:
+        use = np.ascontiguousarray(among, dtype=bool).reshape(-1).view(np.uint8)
     cdef Py_ssize_t* rows = <Py_ssize_t*>malloc(max(n, 1) * sizeof(Py_ssize_t))
     cdef Py_ssize_t* pairs = NULL
     cdef Py_ssize_t a, b
     for k in range(n):
-        rows[k] = k
-    count = close_end_pairs(s, rows, n, radius_px, &pairs)
+        if among is None or use[k]:
+            rows[m] = k
+            m += 1
+            loose[k, 0] = loose[k, 1] = 1
+    count = close_end_pairs(s, rows, m, radius_px, &pairs)
     for k in range(count):
         a = pairs[2 * k]
         b = pairs[2 * k + 1]
         if a // 2 != b // 2:
-            loose[a // 2, a % 2] = 0
-            loose[b // 2, b % 2] = 0
+            loose[rows[a // 2], a % 2] = 0
+            loose[rows[b // 2], b % 2] = 0
     free(pairs)
     free(rows)
     return out

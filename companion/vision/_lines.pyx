@@ -1,4 +1,3 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
 """Compiled loop of :func:`companion.vision.lines.extend_segments` (legs grown to their
 junctions), which describes the rule."""
 
@@ -26,19 +25,28 @@ cdef inline double bilinear(const unsigned char[:, ::1] img, double x, double y)
                 + (img[y1, x0] * (1.0 - fx) + img[y1, x1] * fx) * fy)
 
 
-cdef inline double step_across(const unsigned char[:, ::1] img, double x, double y,
-                               double nx, double ny) noexcept nogil:
-    """Grey-level step across an edge at (x, y): the side ``+n`` minus the side ``−n``,
-    sampled at single-precision coordinates."""
-    return bilinear(img, <float>(x + nx), <float>(y + ny)) \
-        - bilinear(img, <float>(x - nx), <float>(y - ny))
+cdef inline double median9(double* v) noexcept nogil:
+    """The median of nine values (sorted in place)."""
+    cdef int a, b
+    cdef double tmp
+    for a in range(1, 9):
+        b = a
+        while b > 0 and v[b] < v[b - 1]:
+            tmp = v[b]
+            v[b] = v[b - 1]
+            v[b - 1] = tmp
+            b -= 1
+    return v[4]
 
 
 def grow_segments(gray, segments, ends, double max_px, double step_px, double offset_px,
-                  double min_contrast, double keep_frac):
-    """Each allowed end of each segment pushed out along its line while the step across
-    it keeps its sign and ``keep_frac`` of its median inside (and ``min_contrast``), in
-    steps of ``step_px`` up to ``max_px``. ``ends`` N×2 bool or None (all). N×4 out."""
+                  double min_contrast, double keep_frac, double side_tol, double side_frac):
+    """Each allowed end of each segment pushed out along its line, in steps of ``step_px``
+    up to ``max_px``, while the edge continues: the step across it keeps its sign and
+    ``keep_frac`` of its median inside (and ``min_contrast``), or one side keeps its
+    median grey level inside within ``max(side_tol, side_frac · |median step|)`` and the
+    other side differs from that median by more than ``min_contrast``. ``ends`` N×2 bool
+    or None (all). N×4 out."""
     cdef const unsigned char[:, ::1] img = np.ascontiguousarray(gray, dtype=np.uint8)
     out_arr = np.array(segments, dtype=float, copy=True).reshape(-1, 4)
     cdef double[:, ::1] s = out_arr
@@ -51,10 +59,12 @@ def grow_segments(gray, segments, ends, double max_px, double step_px, double of
     if not every_end:
         allowed = np.ascontiguousarray(ends, dtype=bool).reshape(-1, 2).view(np.uint8)
     cdef double w_max = img.shape[1] - 1, h_max = img.shape[0] - 1
-    cdef double dx, dy, length, ux, uy, nx, ny, x, y, along, need, sign, tmp
+    cdef double dx, dy, length, ux, uy, nx, ny, x, y, along, need, sign, step, tol, va, vb
+    cdef double side_a_median, side_b_median
     cdef double inside[9]
+    cdef double side_a[9]
+    cdef double side_b[9]
     cdef double grow[2]
-    cdef int a, b
     for i in range(n):
         if not (every_end or allowed[i, 0] or allowed[i, 1]):
             continue
@@ -67,18 +77,21 @@ def grow_segments(gray, segments, ends, double max_px, double step_px, double of
         ny = ux * offset_px
         for k in range(9):
             along = INSIDE[k] * length
-            inside[k] = step_across(img, s[i, 0] + along * ux, s[i, 1] + along * uy, nx, ny)
-        for a in range(1, 9):  # median of the nine steps inside the segment
-            b = a
-            while b > 0 and inside[b] < inside[b - 1]:
-                tmp = inside[b]
-                inside[b] = inside[b - 1]
-                inside[b - 1] = tmp
-                b -= 1
-        sign = (inside[4] > 0) - (inside[4] < 0)
-        need = <float>keep_frac * <float>abs(inside[4])
+            x = s[i, 0] + along * ux
+            y = s[i, 1] + along * uy
+            side_a[k] = bilinear(img, <float>(x + nx), <float>(y + ny))
+            side_b[k] = bilinear(img, <float>(x - nx), <float>(y - ny))
+            inside[k] = side_a[k] - side_b[k]
+        step = median9(inside)
+        side_a_median = median9(side_a)
+        side_b_median = median9(side_b)
+        sign = (step > 0) - (step < 0)
+        need = <float>keep_frac * <float>abs(step)
         if need < min_contrast:
             need = min_contrast
+        tol = side_frac * abs(step)
+        if tol < side_tol:
+            tol = side_tol
         for e in range(2):
             grow[e] = 0.0
             if sign == 0 or not (every_end or allowed[i, e]):
@@ -90,7 +103,16 @@ def grow_segments(gray, segments, ends, double max_px, double step_px, double of
                 y = s[i, 1] + along * uy
                 if not (0.0 <= x <= w_max and 0.0 <= y <= h_max):
                     break
-                if sign * step_across(img, x, y, nx, ny) < need:
+                va = bilinear(img, <float>(x + nx), <float>(y + ny))
+                vb = bilinear(img, <float>(x - nx), <float>(y - ny))
+                # The edge goes on with the same contrast, or, where the background behind
+                # an occluding edge changes, with one side the same surface as inside and
+                # the other side not that surface.
+                if not (sign * (va - vb) >= need
+                        or (abs(va - side_a_median) <= tol
+                            and abs(vb - side_a_median) > min_contrast)
+                        or (abs(vb - side_b_median) <= tol
+                            and abs(va - side_b_median) > min_contrast)):
                     break
                 count += 1
             grow[e] = step_px * count

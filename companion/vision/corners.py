@@ -108,15 +108,19 @@ def find_corners(
         math.sin(math.radians(p.min_vertical_leg_angle_deg)), p.leg_gap_frac, p.top_k))
 
 
-def loose_ends(segments: np.ndarray, radius_px: float) -> np.ndarray:
+def loose_ends(segments: np.ndarray, radius_px: float,
+               among: np.ndarray | None = None) -> np.ndarray:
     """Which segment ends meet no other segment's end within ``radius_px`` (N×2 bool).
 
     Only these may be grown toward a junction
     (:func:`~companion.vision.lines.extend_segments`): an end that already meets another
     is at its junction, and growing it could carry it past the corner, where the two legs
-    would no longer meet.
+    would no longer meet. With ``among`` (N bool) only those segments count, and the
+    others are not loose: the pipeline passes the segments that can make a Table-I corner
+    (verticals and obstacle legs), since a room line ending on an obstacle's edge is the
+    obstacle hiding it (a T-junction), not the obstacle's corner.
     """
-    return _loose_ends(segments, radius_px)
+    return _loose_ends(segments, radius_px, among)
 
 
 def table1_labels(segments: np.ndarray, vps: np.ndarray, params: CornerParams) -> np.ndarray:

@@ -102,19 +102,27 @@ def filter_segments(segments: np.ndarray, min_length_px: float, max_count: int) 
 
 def extend_segments(gray: np.ndarray, segments: np.ndarray, max_px: float = 24.0,
                     step_px: float = 2.0, offset_px: float = 2.0, min_contrast: float = 4.0,
-                    keep_frac: float = 0.5, ends: np.ndarray | None = None) -> np.ndarray:
+                    keep_frac: float = 0.5, side_tol: float = 8.0, side_frac: float = 0.25,
+                    ends: np.ndarray | None = None) -> np.ndarray:
     """Segments grown along their own line for as long as the image still shows their edge.
 
     Line detectors stop a few pixels short of junctions, where the gradient turns, but a
-    corner projection (eq. 2) needs legs that reach the junction. The grey-level step
-    across each segment (``offset_px`` either side of it) is sampled inside it and every
-    ``step_px`` beyond each end; an end moves out while the step beyond it keeps the
-    segment's sign and at least ``keep_frac`` of its median size (and ``min_contrast``
-    grey levels), up to ``max_px``. Photometric evidence, so a leg is not stretched to a
-    junction that is not in the image.
+    corner projection (eq. 2) needs legs that reach the junction. The grey levels either
+    side of each segment (``offset_px`` away) are sampled inside it and every ``step_px``
+    beyond each end; an end moves out, up to ``max_px``, while the edge goes on:
+
+    - the step across it keeps the segment's sign and at least ``keep_frac`` of its
+      median size inside (and ``min_contrast`` grey levels); or
+    - one side keeps its median grey level inside, within ``max(side_tol, side_frac ·
+      |median step|)``, and the other side differs from that grey level by more than
+      ``min_contrast``: the edge of an object whose background changes (wall, then
+      skirting board, then floor).
+
+    Photometric evidence, so a leg is not stretched to a junction that is not in the
+    image; past a box's convex corner both sides turn into one surface and growth stops.
 
     Inputs: ``gray`` H×W uint8, ``segments`` N×4 pixels, ``ends`` N×2 bool: which ends
     may grow (default all). Output: N×4, same order.
     """
     return grow_segments(gray, segments, ends, max_px, step_px, offset_px, min_contrast,
-                         keep_frac)
+                         keep_frac, side_tol, side_frac)

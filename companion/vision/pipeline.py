@@ -27,7 +27,7 @@ from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
-from companion.vision.vanishing import V1, V2, LayoutVPs, assign_segments, detect_layout_vps
+from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
 __all__ = ["Estimate", "Pipeline", "STAGES"]
 
@@ -164,10 +164,10 @@ class Pipeline:
         # Labels are judged on the detected segments; corners and pairs are built from the
         # same segments grown to the junctions the detector stopped short of.
         strict_labels = table1_labels(segments, layout.vps, vc.corners)
-        segments = extend_segments(gray, segments, max_px=vc.corners.leg_growth_px,
-                                   ends=loose_ends(segments, vc.corners.radius_px))
-        corners = find_corners(segments, labels, vc.corners)
         free_legs = obstacle_legs(labels, strict_labels)
+        ends = loose_ends(segments, vc.corners.radius_px, among=free_legs | (labels == V3))
+        segments = extend_segments(gray, segments, max_px=vc.corners.leg_growth_px, ends=ends)
+        corners = find_corners(segments, labels, vc.corners)
         obstacle_corners = corners.take(table1_mask(corners, labels, free_legs))
         t3 = time.perf_counter()
         ms["corners"] = (t3 - t2) * 1e3
