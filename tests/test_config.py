@@ -37,6 +37,16 @@ def test_partial_file_overrides_only_its_keys(tmp_path):
         ({"policy": {"max_turn_deg": -5}}, "policy.max_turn_deg must be between"),
         ({"vision": {"detector": "hough"}}, "vision.detector must be one of edlines, lsd"),
         ({"policy": 3}, "policy must be a mapping"),
+        # Values the vision stages cannot run with (a zero-width histogram bin, no V3
+        # hypothesis to complete) are refused here, not met as a crash mid-flight.
+        ({"vision": {"vanishing": {"histogram_bin_deg": 0}}},
+         "vision.vanishing.histogram_bin_deg must be between 0.05 and 10"),
+        ({"vision": {"vanishing": {"histogram_sigma_deg": 0}}},
+         "vision.vanishing.histogram_sigma_deg must be between"),
+        ({"vision": {"vanishing": {"vertical_alternatives": 0}}},
+         "vision.vanishing.vertical_alternatives must be between 1 and 16"),
+        ({"vision": {"obstacles": {"orthogonal_tol_deg": 0}}},
+         "vision.obstacles.orthogonal_tol_deg must be between"),
         ([1, 2], "top level must be a mapping"),
     ],
 )

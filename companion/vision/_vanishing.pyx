@@ -37,6 +37,7 @@ cdef struct Params:
     double histogram_sigma_deg
     double peak_min_share
     int max_horizontal_vps
+    int vertical_alternatives
     double orthogonal_tol_deg
     double min_vp_separation_deg
 
@@ -53,6 +54,7 @@ cdef Params _params(p):
     q.histogram_sigma_deg = p.histogram_sigma_deg
     q.peak_min_share = p.peak_min_share
     q.max_horizontal_vps = p.max_horizontal_vps
+    q.vertical_alternatives = p.vertical_alternatives
     q.orthogonal_tol_deg = p.orthogonal_tol_deg
     q.min_vp_separation_deg = p.min_vp_separation_deg
     return q
@@ -136,28 +138,24 @@ cdef bint refine(double[:, ::1] ns, double[:, ::1] lines, const unsigned char* u
     return True
 
 
-cdef bint vertical_vp(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengths,
-                      double focal, Params* p, double* best, unsigned char[::1] inl):
-    """V3: pairs of the longest near-vertical segments as hypotheses (and straight down),
-    scored MSAC-style, the best refined twice; ``inl`` its inliers. False: the default."""
-    cdef Py_ssize_t n = ns.shape[0], i, j, k, c, h
+cdef tuple vertical_hypotheses(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengths,
+                               double focal, Params* p, unsigned char[::1] is_cand):
+    """V3 hypotheses: pairs of the longest near-vertical segments (and straight down),
+    each scored MSAC-style against the near-vertical segments (marked in ``is_cand``).
+    Returns (hypotheses H×3, scores H), or None with fewer than two candidates."""
+    cdef Py_ssize_t n = ns.shape[0], i, j, c, h
     cdef double min_cos = cos(p.vertical_max_camera_tilt_deg * DEG2RAD)
-    cdef double sin_max = sin(p.max_angle_deg * DEG2RAD)  # see the note in the scoring
-    cdef unsigned char[::1] is_cand = np.zeros(n, np.uint8)
     cdef Py_ssize_t[::1] cand = np.empty(n, np.intp)
     cdef Py_ssize_t ncand = 0, ntop, tmp
     for i in range(n):
-        inl[i] = 0
+        is_cand[i] = 0
         if degrees(atan2(abs(ns[i, 2] - ns[i, 0]), abs(ns[i, 3] - ns[i, 1]))) \
                 <= p.vertical_max_tilt_deg:
             cand[ncand] = i
             ncand += 1
             is_cand[i] = 1
-    best[0] = 0.0
-    best[1] = 1.0
-    best[2] = 0.0
     if ncand < 2:
-        return False
+        return None
     # The longest candidates, by length then index (a stable sort).
     cdef Py_ssize_t[::1] top = np.empty(ncand, np.intp)
     for i in range(ncand):
@@ -169,7 +167,8 @@ cdef bint vertical_vp(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengt
             top[j - 1] = tmp
             j -= 1
     ntop = min(ncand, <Py_ssize_t>p.vertical_hypothesis_segments)
-    cdef double[:, ::1] hyps = np.empty((1 + ntop * (ntop - 1) // 2, 3))
+    hyps_arr = np.empty((1 + ntop * (ntop - 1) // 2, 3))
+    cdef double[:, ::1] hyps = hyps_arr
     cdef Py_ssize_t nh = 0
     cdef double hv[3]
     cdef double nrm
@@ -199,9 +198,11 @@ cdef bint vertical_vp(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengt
     # u × t and |t|² are linear in products of h's entries, so each candidate's and each
     # hypothesis's factors are computed once, and the tests compare squares.
     cdef double[:, ::1] cf = np.empty((ncand, 7))
-    cdef double cl, mx, my, ux, uy, cross, t2, r2, score, best_score = -1.0
-    cdef double h0, h1, h2, hh, hw0, hw1, ww, sin2 = sin_max * sin_max
-    cdef Py_ssize_t best_h = 0
+    scores_arr = np.zeros(nh)
+    cdef double[::1] scores = scores_arr
+    cdef double cl, mx, my, ux, uy, cross, t2, r2, score
+    cdef double h0, h1, h2, hh, hw0, hw1, ww
+    cdef double sin2 = sin(p.max_angle_deg * DEG2RAD) ** 2
     cdef double scale = focal / (2.0 * p.residual_px)
     for c in range(ncand):
         i = cand[c]
@@ -231,26 +232,31 @@ cdef bint vertical_vp(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengt
                 + ww * (cf[c, 3] * cf[c, 3] + cf[c, 4] * cf[c, 4])
             if t2 <= 1e-30:
                 r2 = cf[c, 5]  # t ≈ 0: sin taken as 1
-                if r2 <= 1.0 and sin_max >= 1.0:
+                if r2 <= 1.0 and sin2 >= 1.0:
                     score += cf[c, 6] * (1.0 - r2)
                 continue
-            # r = sin · l · scale ≤ 1 and sin ≤ sin_max, with sin² = cross² / |t|².
+            # u has length 1/f here (pixels over pixel length, in normalised coordinates):
+            # sin² = cross² f² / |t|², and the residual r = sin · l · scale ≤ 1.
             r2 = cross * cf[c, 5]
             if r2 <= t2 and cross * (focal * focal) <= sin2 * t2:
                 score += cf[c, 6] * (1.0 - r2 / t2)
-        if score > best_score:
-            best_score = score
-            best_h = h
-    for k in range(3):
-        best[k] = hyps[best_h, k]
+        scores[h] = score
+    return hyps_arr, scores_arr
+
+
+cdef bint refine_vertical(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* p,
+                          const unsigned char* is_cand, double* best, unsigned char[::1] inl):
+    """V3 from hypothesis ``best`` (in place): refined twice on the near-vertical segments,
+    ``inl`` its inliers. False (``best`` the default, straight down, and no inliers) when
+    fewer than two segments back it or it leans beyond the camera-tilt limit."""
+    cdef Py_ssize_t n = ns.shape[0], i, k, count = 0
+    cdef double min_cos = cos(p.vertical_max_camera_tilt_deg * DEG2RAD)
     for k in range(2):
-        if not refine(ns, lines, &is_cand[0], focal, p, best):
+        if not refine(ns, lines, is_cand, focal, p, best):
             break
-    cdef Py_ssize_t count = 0
     for i in range(n):
-        if is_cand[i] and is_inlier(&ns[i, 0], best, focal, p):
-            inl[i] = 1
-            count += 1
+        inl[i] = is_cand[i] and is_inlier(&ns[i, 0], best, focal, p)
+        count += inl[i]
     if count < 2 or abs(best[1]) / norm3(best) < min_cos:
         for i in range(n):
             inl[i] = 0
@@ -315,12 +321,18 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     """The layout VPs of ``segments_px`` (N×4 pixels) for a pinhole with principal point
     ``(cx, cy)`` and ``focal`` pixels.
 
+    V3 and the horizontal VPs are one Manhattan frame: the best
+    ``vertical_alternatives`` distinct V3 hypotheses are each completed with their
+    horizontal VPs, and the frame with the most support (V3, V1 and V2 together) wins,
+    so that two long oblique lines that happen to meet below the image do not pass for
+    the vertical when the horizontal structure says otherwise.
+
     Returns ``(vps 3×3, observed (v1, v2, v3), supports 3, others K×3, others_support K)``:
     rows V1 (LMVP), V2, V3 and the further horizontal VPs as unit homogeneous pixel points.
     """
     cdef Params p = _params(params)
     cdef double[:, ::1] s = np.ascontiguousarray(segments_px, dtype=float).reshape(-1, 4)
-    cdef Py_ssize_t n = s.shape[0], i, k, j, ci
+    cdef Py_ssize_t n = s.shape[0], i, k, j, h
     cdef double[:, ::1] ns = np.empty((n, 4))
     cdef double[:, ::1] lines = np.empty((n, 3))
     cdef double[::1] lengths = np.empty(n)
@@ -332,11 +344,57 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
         segment_line(ns[i, 0], ns[i, 1], ns[i, 2], ns[i, 3], &lines[i, 0])
         lengths[i] = hypot(s[i, 2] - s[i, 0], s[i, 3] - s[i, 1])
 
-    inliers = np.zeros(n, np.uint8)
-    cdef unsigned char[::1] v3_inl = inliers
+    cdef unsigned char[::1] is_cand = np.zeros(n, np.uint8)
+    cdef unsigned char[::1] inl = np.zeros(n, np.uint8)
     cdef double v3[3]
-    cdef bint v3_ok = vertical_vp(ns, lines, lengths, focal, &p, v3, v3_inl)
+    cdef double tried[16][3]
+    cdef int ntried = 0, t
+    cdef bint ok, distinct
+    scored = vertical_hypotheses(ns, lines, lengths, focal, &p, is_cand)
+    best = None
+    if scored is None:
+        v3[0], v3[1], v3[2] = 0.0, 1.0, 0.0
+        best = horizontal_frame(ns, lines, lengths, focal, &p, v3, False, inl)
+    else:
+        hyps, scores = scored
+        order = np.argsort(-scores, kind="stable")
+        for h in order:
+            if ntried >= max(1, min(p.vertical_alternatives, 16)):
+                break
+            for k in range(3):
+                v3[k] = hyps[h, k]
+            distinct = True
+            for t in range(ntried):
+                if angle_between_deg(v3, tried[t]) < p.min_vp_separation_deg:
+                    distinct = False
+                    break
+            if not distinct:
+                continue
+            for k in range(3):
+                tried[ntried][k] = v3[k]
+            ntried += 1
+            ok = refine_vertical(ns, lines, focal, &p, &is_cand[0], v3, inl)
+            frame = horizontal_frame(ns, lines, lengths, focal, &p, v3, ok, inl)
+            if best is None or frame[0] > best[0]:
+                best = frame
+    _, dirs, observed, supports, other_dirs, other_support = best
+    cdef double[:, ::1] d = dirs
+    for i in range(3):
+        to_pixels(&d[i, 0], cx, cy, focal)
+    cdef double[:, ::1] o = other_dirs
+    for i in range(o.shape[0]):
+        to_pixels(&o[i, 0], cx, cy, focal)
+    return dirs, observed, supports, other_dirs, other_support
 
+
+cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengths,
+                            double focal, Params* p, double* v3, bint v3_ok,
+                            unsigned char[::1] v3_inl):
+    """The horizontal VPs for vertical VP ``v3`` (its inliers ``v3_inl`` set aside), and
+    the frame's support. Returns (support of V3, V1 and V2 together, directions 3×3 (V1,
+    V2, V3), observed (v1, v2, v3), supports 3 (V1, V2 MSAC-weighted; V3 inlier length),
+    other directions K×3, their supports K)."""
+    cdef Py_ssize_t n = ns.shape[0], i, k, j, ci
     # Horizontal VPs: each non-vertical line crosses the horizon at the azimuth θ of the
     # direction it would have if it were a horizontal edge.
     cdef double d3[3]
@@ -365,7 +423,7 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
             theta[i] += 180.0
         use[i] = rest[i] and norm3(pt) > 1e-9
     cdef double[::1] peaks = np.empty(2 * p.max_horizontal_vps)
-    cdef int npk = histogram_peaks(theta, lengths, use, &p, peaks)
+    cdef int npk = histogram_peaks(theta, lengths, use, p, peaks)
 
     # Each peak refined (twice) without the horizon constraint, then scored.
     cdef double[:, ::1] pv = np.empty((max(npk, 1), 3))
@@ -376,10 +434,10 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
         for j in range(3):
             pv[k, j] = sin(t) * e1[j] + cos(t) * e2[j]
         for j in range(2):
-            refine(ns, lines, &rest[0], focal, &p, &pv[k, 0])
+            refine(ns, lines, &rest[0], focal, p, &pv[k, 0])
         for i in range(n):
             if rest[i]:
-                support[k] += lengths[i] * msac_score(&ns[i, 0], &pv[k, 0], focal, &p)
+                support[k] += lengths[i] * msac_score(&ns[i, 0], &pv[k, 0], focal, p)
 
     # Candidates in order of peak height: distinct, and not the vertical VP.
     cands = []
@@ -415,7 +473,7 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
             d[0, j] = e1[j] * sin(90.0 * DEG2RAD) + e2[j] * cos(90.0 * DEG2RAD)
             d[1, j] = e2[j]
     else:
-        first, second, v2_seen, others = _choose_layout(cands, pv, d3, &p)
+        first, second, v2_seen, others = _choose_layout(cands, pv, d3, p)
         k = first[0]
         for j in range(3):
             d[0, j] = pv[k, j]
@@ -435,20 +493,15 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
                     pt[j] = -pt[j]
             for j in range(3):
                 d[1, j] = pt[j]
-    v3_support = 0.0
+    v3_length = v3_score = 0.0
     for i in range(n):
         if v3_inl[i]:
-            v3_support += lengths[i]
-    for i in range(3):
-        to_pixels(&d[i, 0], cx, cy, focal)
-    other_vps = np.empty((len(others), 3))
-    cdef double[:, ::1] o = other_vps
-    for i, (k, _) in enumerate(others):
-        for j in range(3):
-            o[i, j] = pv[k, j]
-        to_pixels(&o[i, 0], cx, cy, focal)
-    return (dirs, (observed_v1, observed_v2, bool(v3_ok)), np.array([s1, s2, v3_support]),
-            other_vps, np.array([w for _, w in others], dtype=float))
+            v3_length += lengths[i]
+            v3_score += lengths[i] * msac_score(&ns[i, 0], v3, focal, p)
+    other_dirs = np.array([[pv[k, 0], pv[k, 1], pv[k, 2]] for k, _ in others]).reshape(-1, 3)
+    return (v3_score + s1 + s2, dirs, (observed_v1, observed_v2, bool(v3_ok)),
+            np.array([s1, s2, v3_length]), other_dirs,
+            np.array([w for _, w in others], dtype=float))
 
 
 cdef inline void to_pixels(double* d, double cx, double cy, double focal) noexcept nogil:

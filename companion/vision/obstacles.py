@@ -21,7 +21,7 @@ whose legs pass through those OVPs join it (the paper's use of λ3 across corner
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -39,7 +39,8 @@ class ObstacleParams:
     collinear_px: float = 3.0  # λ1 gate (eq. 6)
     min_edge_px: float = 12.0  # corners of a pair at least this far apart
     horizon_tol_deg: float = 6.0  # λ3: OVP directions this close to horizontal (eq. 8)
-    orthogonal_tol_deg: float = 20.0  # λ3: O1 ⟂ O2 within this (focal length is a guess)
+    orthogonal_tol_deg: float = field(default=20.0, metadata={"range": (0.1, 45.0)})
+    """λ3: O1 ⟂ O2 within this (focal length is a guess); a divisor of λ3"""
     single_corner_orthogonal_tol_deg: float = 8.0  # the same when C_h shows no leg
     non_manhattan_min_deg: float = 5.0  # OVPs at least this far from V1 and V2
     merge_deg: float = 3.0  # pairs whose OVPs agree this well are one obstacle

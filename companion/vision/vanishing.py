@@ -48,20 +48,32 @@ V1, V2, V3, NONE = 0, 1, 2, -1
 
 @dataclass(frozen=True)
 class VPParams:
-    """Thresholds of the VP stage (pixels and degrees)."""
+    """Thresholds of the VP stage (pixels and degrees). ``range`` in a field's metadata is
+    what the config accepts for it."""
 
-    residual_px: float = 2.0  # endpoint distance from the segment–VP line for an inlier
-    max_angle_deg: float = 4.0  # and at most this angle between segment and VP direction
-    vertical_max_tilt_deg: float = 25.0  # V3 candidates lean at most this far from image vertical
-    vertical_hypothesis_segments: int = 30  # longest candidates whose pairs are V3 hypotheses
-    vertical_max_camera_tilt_deg: float = 35.0  # V3 within this of the camera's down axis
-    histogram_bin_deg: float = 0.5
-    histogram_sigma_deg: float = 1.0
-    peak_min_share: float = 0.04  # a horizontal peak holds >= this share of horizontal length
-    max_horizontal_vps: int = 6
-    orthogonal_tol_deg: float = 20.0  # V1 ⟂ V2 within this when the focal length is a guess
-    known_focal_orthogonal_tol_deg: float = 10.0  # ... and when it is given
-    min_vp_separation_deg: float = 3.0  # peaks closer than this are one VP
+    residual_px: float = field(default=2.0, metadata={"range": (0.1, 50.0)})
+    """endpoint distance from the segment–VP line for an inlier"""
+    max_angle_deg: float = field(default=4.0, metadata={"range": (0.1, 45.0)})
+    """and at most this angle between segment and VP direction"""
+    vertical_max_tilt_deg: float = field(default=25.0, metadata={"range": (1.0, 60.0)})
+    """V3 candidates lean at most this far from image vertical"""
+    vertical_hypothesis_segments: int = field(default=30, metadata={"range": (2, 200)})
+    """longest candidates whose pairs are V3 hypotheses"""
+    vertical_max_camera_tilt_deg: float = field(default=35.0, metadata={"range": (1.0, 89.0)})
+    """V3 within this of the camera's down axis"""
+    vertical_alternatives: int = field(default=3, metadata={"range": (1, 16)})
+    """distinct V3 hypotheses each completed into a frame"""
+    histogram_bin_deg: float = field(default=0.5, metadata={"range": (0.05, 10.0)})
+    histogram_sigma_deg: float = field(default=1.0, metadata={"range": (0.05, 10.0)})
+    peak_min_share: float = field(default=0.04, metadata={"range": (0.0, 1.0)})
+    """a horizontal peak holds >= this share of horizontal length"""
+    max_horizontal_vps: int = field(default=6, metadata={"range": (2, 20)})
+    orthogonal_tol_deg: float = field(default=20.0, metadata={"range": (0.0, 45.0)})
+    """V1 ⟂ V2 within this when the focal length is a guess"""
+    known_focal_orthogonal_tol_deg: float = field(default=10.0, metadata={"range": (0.0, 45.0)})
+    """... and when it is given"""
+    min_vp_separation_deg: float = field(default=3.0, metadata={"range": (0.0, 45.0)})
+    """peaks closer than this are one VP"""
 
 
 @dataclass(frozen=True)
