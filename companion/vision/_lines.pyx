@@ -45,8 +45,8 @@ def grow_segments(gray, segments, ends, double max_px, double step_px, double of
     up to ``max_px``, while the edge continues: the step across it keeps its sign and
     ``keep_frac`` of its median inside (and ``min_contrast``), or one side keeps its
     median grey level inside within ``max(side_tol, side_frac · |median step|)`` and the
-    other side differs from that median by more than ``min_contrast``. ``ends`` N×2 bool
-    or None (all). N×4 out."""
+    other side differs from that median by more than ``side_tol``. ``ends`` N×2 bool or
+    None (all). N×4 out."""
     cdef const unsigned char[:, ::1] img = np.ascontiguousarray(gray, dtype=np.uint8)
     out_arr = np.array(segments, dtype=float, copy=True).reshape(-1, 4)
     cdef double[:, ::1] s = out_arr
@@ -107,12 +107,13 @@ def grow_segments(gray, segments, ends, double max_px, double step_px, double of
                 vb = bilinear(img, <float>(x - nx), <float>(y - ny))
                 # The edge goes on with the same contrast, or, where the background behind
                 # an occluding edge changes, with one side the same surface as inside and
-                # the other side not that surface.
+                # the other side not that surface (more than side_tol from it: texture on
+                # a floor seen past a corner differs by less).
                 if not (sign * (va - vb) >= need
                         or (abs(va - side_a_median) <= tol
-                            and abs(vb - side_a_median) > min_contrast)
+                            and abs(vb - side_a_median) > side_tol)
                         or (abs(vb - side_b_median) <= tol
-                            and abs(va - side_b_median) > min_contrast)):
+                            and abs(va - side_b_median) > side_tol)):
                     break
                 count += 1
             grow[e] = step_px * count

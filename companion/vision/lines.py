@@ -115,8 +115,8 @@ def extend_segments(gray: np.ndarray, segments: np.ndarray, max_px: float = 24.0
       median size inside (and ``min_contrast`` grey levels); or
     - one side keeps its median grey level inside, within ``max(side_tol, side_frac ·
       |median step|)``, and the other side differs from that grey level by more than
-      ``min_contrast``: the edge of an object whose background changes (wall, then
-      skirting board, then floor).
+      ``side_tol``: the edge of an object whose background changes (wall, then skirting
+      board, then floor).
 
     Photometric evidence, so a leg is not stretched to a junction that is not in the
     image; past a box's convex corner both sides turn into one surface and growth stops.
