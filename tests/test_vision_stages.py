@@ -287,6 +287,66 @@ def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 1e-6
 
 
+def _level_layout():
+    from companion.vision.vanishing import LayoutVPs
+
+    return LayoutVPs(
+        vps=np.array([[1.0, 0.0, 0.0], [C[0], C[1], 1.0], [0.0, 1.0, 0.0]]),
+        observed=(True, True, True), support_px=np.ones(3), focal_px=F, centre=C)
+
+
+def test_an_unseen_vertical_edge_is_implied_by_leg_junctions_above_each_other():
+    # Both faces alike: no vertical edge of the box is seen, only the top and bottom edges
+    # of its two faces, which meet at the top and at the bottom of the middle edge.
+    from companion.vision.obstacles import find_obstacles
+
+    a = np.radians(35.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.2, 1.2, 4.0])
+    up = np.array([0.0, -2.4, 0.0])  # taller than the camera: the top face is hidden
+    b, bu, bv, t, tu, tv = _project([front, front + 0.8 * u, front + 0.8 * v,
+                                     front + up, front + up + 0.8 * u, front + up + 0.8 * v])
+    segs = np.array([[*t, *tu], [*t, *tv], [*b, *bu], [*b, *bv]])
+    labels = np.full(4, NONE)
+    no_corners = find_corners(segs, labels)
+    assert len(no_corners) == 0
+    found = find_obstacles(segs, no_corners, _level_layout(), labels == NONE, labels)
+    assert len(found) == 1
+    dirs = direction_of(found[0].ovps[:2], F, C)
+    for face in (u, v):
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+
+
+def test_a_rug_seen_along_its_diagonal_is_no_unseen_vertical_edge():
+    # A rug 30° off the room, its near and far corners one above the other in the image:
+    # two leg junctions along V3, but the legs on one side are two different edges, which
+    # meet at the rug's side corner on the floor, not on the horizon.
+    from companion.vision.geometry import point_of
+    from companion.vision.obstacles import find_obstacles
+    from companion.vision.vanishing import LayoutVPs
+
+    a = np.radians(45.0)  # its diagonal along the view
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    near = np.array([0.0, 1.2, 2.5])  # on the floor
+    n, lft, rgt, f = _project([near, near + 1.2 * v, near + 1.2 * u, near + 1.2 * (u + v)])
+    assert abs(n[0] - f[0]) < 1e-6  # the two corners share an image column
+    segs = np.array([[*n, *lft], [*n, *rgt], [*f, *lft], [*f, *rgt]])
+    labels = np.full(4, NONE)
+    r = np.radians(15.0)  # the room 30° off the rug, so its edges are free legs
+    room = point_of(np.array([[np.cos(r), 0.0, np.sin(r)], [-np.sin(r), 0.0, np.cos(r)]]), F, C)
+    layout = LayoutVPs(vps=np.vstack([room, [0.0, 1.0, 0.0]]), observed=(True, True, True),
+                       support_px=np.ones(3), focal_px=F, centre=C)
+    assert find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE,
+                          labels) == []
+    # Mirrored above the horizon, the near corner's legs are the faces of a box standing
+    # there, and are found: what rules the rug out is the horizon test.
+    top = segs.copy()
+    top[:, [1, 3]] = C[1] - (segs[:, [1, 3]] - C[1])  # mirrored above the horizon
+    box = np.array([top[0], top[1], segs[0], segs[1]])
+    assert len(find_obstacles(box, find_corners(box, labels), layout, labels == NONE,
+                              labels)) == 1
+
+
 def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
     from companion.vision.corners import table1_labels
 

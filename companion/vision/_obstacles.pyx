@@ -507,6 +507,127 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list ed
         h.npoints = 2
 
 
+cdef list leg_junctions(double[:, ::1] s, double[:, ::1] lines, double[::1] lengths,
+                        Py_ssize_t[::1] free_idx, double min_leg_sin, Params* p):
+    """Two obstacle legs whose ends meet at their intersection, at least
+    ``asin(min_leg_sin)`` apart (a corner projection without its vertical leg, eq. 2).
+    Returns a list of (x, y, leg a, leg b)."""
+    cdef Py_ssize_t i, j, a, b
+    cdef double q[3]
+    cdef double x, y, d, r2 = p.radius_px * p.radius_px, sn
+    out = []
+    for i in range(free_idx.shape[0]):
+        a = free_idx[i]
+        if lengths[a] < p.min_edge_px:
+            continue
+        for j in range(i + 1, free_idx.shape[0]):
+            b = free_idx[j]
+            if lengths[b] < p.min_edge_px:
+                continue
+            d = min(min((s[a, 0] - s[b, 0]) ** 2 + (s[a, 1] - s[b, 1]) ** 2,
+                        (s[a, 0] - s[b, 2]) ** 2 + (s[a, 1] - s[b, 3]) ** 2),
+                    min((s[a, 2] - s[b, 0]) ** 2 + (s[a, 3] - s[b, 1]) ** 2,
+                        (s[a, 2] - s[b, 2]) ** 2 + (s[a, 3] - s[b, 3]) ** 2))
+            if d > r2:
+                continue
+            sn = abs((s[a, 2] - s[a, 0]) * (s[b, 3] - s[b, 1])
+                     - (s[a, 3] - s[a, 1]) * (s[b, 2] - s[b, 0])) / (lengths[a] * lengths[b])
+            if sn < min_leg_sin or not intersect(&lines[a, 0], &lines[b, 0], q) \
+                    or abs(q[2]) < 1e-12:
+                continue
+            x, y = q[0] / q[2], q[1] / q[2]
+            if end_gap(s, a, x, y) > p.radius_px or end_gap(s, b, x, y) > p.radius_px:
+                continue
+            out.append((x, y, a, b))
+    return out
+
+
+cdef void junction_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
+                         list junctions, const double* v3_px, Hypotheses* found) except *:
+    """Two leg junctions one above the other along V3: the top and bottom corners of a
+    vertical edge the detector did not see (both faces alike), the paper's pair (eqs. 6–8)
+    with L_r implied. At each junction one leg must leave toward each side of the edge;
+    the two legs on a side bound one face, so they meet at its OVP, and the two OVPs
+    must pass eq. 8 (horizon, orthogonality, away from V1 and V2)."""
+    cdef Py_ssize_t i, j, k
+    cdef double vline[3]
+    cdef double ja[3]
+    cdef double o1[3]
+    cdef double o2[3]
+    cdef double d1[3]
+    cdef double d2[3]
+    cdef double ex, ey, length, hor, ortho, lam, min_side = sin(20.0 * DEG2RAD)
+    cdef Py_ssize_t legs_a[2]
+    cdef Py_ssize_t legs_b[2]
+    cdef Hypothesis* h
+    for i in range(len(junctions)):
+        xa, ya, a1, a2 = junctions[i]
+        ja[0], ja[1], ja[2] = xa, ya, 1.0
+        # The vertical line through this junction (toward V3), in pixel distances.
+        cross3(ja, v3_px, vline)
+        length = hypot(vline[0], vline[1])
+        if length <= 0:
+            continue
+        vline[0] /= length
+        vline[1] /= length
+        vline[2] /= length
+        for j in range(i + 1, len(junctions)):
+            xb, yb, b1, b2 = junctions[j]
+            length = hypot(xb - xa, yb - ya)
+            if length < 2 * p.min_edge_px \
+                    or abs(vline[0] * xb + vline[1] * yb + vline[2]) > p.collinear_px:
+                continue
+            if len({a1, a2, b1, b2}) < 4:
+                continue
+            ex, ey = (xb - xa) / length, (yb - ya) / length
+            if not (_split(s, a1, a2, xa, ya, ex, ey, min_side, legs_a)
+                    and _split(s, b1, b2, xb, yb, ex, ey, min_side, legs_b)):
+                continue
+            if not (intersect(&lines[legs_a[0], 0], &lines[legs_b[0], 0], o1)
+                    and intersect(&lines[legs_a[1], 0], &lines[legs_b[1], 0], o2)):
+                continue
+            direction_of(fr, o1, d1)
+            direction_of(fr, o2, d2)
+            ovp_error(fr, d1, d2, &hor, &ortho)
+            if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg \
+                    or not (off_layout(fr, p, d1) and off_layout(fr, p, d2)):
+                continue
+            lam = ortho * p.horizon_tol_deg / p.orthogonal_tol_deg
+            h = new_hypothesis(found)
+            for k in range(3):
+                h.d1[k] = d1[k]
+                h.d2[k] = d2[k]
+            h.lam3 = hor if hor > lam else lam
+            h.edge = length
+            h.legs[0], h.legs[1], h.legs[2], h.legs[3] = legs_a[0], legs_b[0], legs_a[1], legs_b[1]
+            h.nlegs = 4
+            h.points[0], h.points[1], h.points[2], h.points[3] = xa, ya, xb, yb
+            h.npoints = 2
+
+
+cdef bint _split(double[:, ::1] s, Py_ssize_t a, Py_ssize_t b, double x, double y, double ex,
+                 double ey, double min_side, Py_ssize_t* out) noexcept:
+    """The two legs of a junction at (x, y) by the side of the edge (direction (ex, ey))
+    they leave toward: ``out`` = (the −1 side's, the +1 side's). False unless one leaves
+    toward each side, each at least ``asin(min_side)`` off the edge."""
+    cdef double sa = _side(s, a, x, y, ex, ey), sb = _side(s, b, x, y, ex, ey)
+    if abs(sa) < min_side or abs(sb) < min_side or (sa > 0) == (sb > 0):
+        return False
+    out[0], out[1] = (a, b) if sa < 0 else (b, a)
+    return True
+
+
+cdef inline double _side(double[:, ::1] s, Py_ssize_t i, double x, double y, double ex,
+                         double ey) noexcept nogil:
+    """Sine of the angle from the edge direction to segment ``i`` leaving (x, y) along it
+    (its far end minus its near end)."""
+    cdef double fx = s[i, 2] - s[i, 0], fy = s[i, 3] - s[i, 1]
+    cdef double n = hypot(fx, fy)
+    if (s[i, 0] - x) ** 2 + (s[i, 1] - y) ** 2 > (s[i, 2] - x) ** 2 + (s[i, 3] - y) ** 2:
+        fx, fy = -fx, -fy
+    return (ex * fy - ey * fx) / (n if n > 0 else 1.0)
+
+
 cdef Py_ssize_t root(Py_ssize_t* parent, Py_ssize_t i) noexcept nogil:
     while parent[i] != i:
         parent[i] = parent[parent[i]]
@@ -646,7 +767,7 @@ cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines
 
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
          double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
-         double radius_px, double leg_gap_frac):
+         double radius_px, double leg_gap_frac, double min_leg_sin):
     """Obstacles from Table-I corners and vertical edges (see
     :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
     corners_px K×2, pairs, height_px, λ3)."""
@@ -735,6 +856,9 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 h.lam3 = lam3
                 h.edge = reach[g]
                 h.corner = g
+        # Vertical edges the detector did not see, implied by leg junctions above each other.
+        junction_pairs(&fr, &p, s, lines, leg_junctions(s, lines, lengths, free_idx, min_leg_sin,
+                                                        &p), &vps[2, 0], &found)
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
         edges = edge_legs(s, lengths, lines, verticals, free_idx, &p)
         silhouette_halves(&fr, &p, lines, edges, &halves)

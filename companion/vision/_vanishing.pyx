@@ -322,10 +322,10 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     ``(cx, cy)`` and ``focal`` pixels.
 
     V3 and the horizontal VPs are one Manhattan frame: the best
-    ``vertical_alternatives`` distinct V3 hypotheses are each completed with their
-    horizontal VPs, and the frame with the most support (V3, V1 and V2 together) wins,
-    so that two long oblique lines that happen to meet below the image do not pass for
-    the vertical when the horizontal structure says otherwise.
+    ``vertical_alternatives`` distinct V3 hypotheses, and straight down, are each
+    completed with their horizontal VPs, and the frame with the most support (V3, V1 and
+    V2 together) wins, so that two long oblique lines that happen to meet below the image
+    do not pass for the vertical when the horizontal structure says otherwise.
 
     Returns ``(vps 3×3, observed (v1, v2, v3), supports 3, others K×3, others_support K)``:
     rows V1 (LMVP), V2, V3 and the further horizontal VPs as unit homogeneous pixel points.
@@ -348,8 +348,8 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     cdef unsigned char[::1] inl = np.zeros(n, np.uint8)
     cdef double v3[3]
     cdef double tried[16][3]
-    cdef int ntried = 0, t
-    cdef bint ok, distinct
+    cdef int ntried = 0
+    cdef bint ok
     scored = vertical_hypotheses(ns, lines, lengths, focal, &p, is_cand)
     best = None
     if scored is None:
@@ -357,22 +357,21 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
         best = horizontal_frame(ns, lines, lengths, focal, &p, v3, False, inl)
     else:
         hyps, scores = scored
-        order = np.argsort(-scores, kind="stable")
-        for h in order:
-            if ntried >= max(1, min(p.vertical_alternatives, 16)):
+        # The best-scored distinct hypotheses, then straight down (hypothesis 0: a level
+        # camera) if it is not one of them: the true verticals can be few and short where
+        # long oblique lines meet below the image.
+        alternatives = max(1, min(p.vertical_alternatives, 15))
+        chosen = []
+        for h in np.argsort(-scores, kind="stable").tolist():
+            if len(chosen) == alternatives:
                 break
+            if new_direction(hyps, h, tried, &ntried, p.min_vp_separation_deg):
+                chosen.append(h)
+        if new_direction(hyps, 0, tried, &ntried, p.min_vp_separation_deg):
+            chosen.append(0)
+        for h in chosen:
             for k in range(3):
                 v3[k] = hyps[h, k]
-            distinct = True
-            for t in range(ntried):
-                if angle_between_deg(v3, tried[t]) < p.min_vp_separation_deg:
-                    distinct = False
-                    break
-            if not distinct:
-                continue
-            for k in range(3):
-                tried[ntried][k] = v3[k]
-            ntried += 1
             ok = refine_vertical(ns, lines, focal, &p, &is_cand[0], v3, inl)
             frame = horizontal_frame(ns, lines, lengths, focal, &p, v3, ok, inl)
             if best is None or frame[0] > best[0]:
@@ -502,6 +501,20 @@ cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1]
     return (v3_score + s1 + s2, dirs, (observed_v1, observed_v2, bool(v3_ok)),
             np.array([s1, s2, v3_length]), other_dirs,
             np.array([w for _, w in others], dtype=float))
+
+
+cdef bint new_direction(double[:, ::1] hyps, Py_ssize_t h, double (*tried)[3], int* ntried,
+                        double min_deg) noexcept:
+    """Whether hypothesis ``h`` is at least ``min_deg`` from every direction in ``tried``;
+    if so it is added to them."""
+    cdef int t
+    for t in range(ntried[0]):
+        if angle_between_deg(&hyps[h, 0], tried[t]) < min_deg:
+            return False
+    for t in range(3):
+        tried[ntried[0]][t] = hyps[h, t]
+    ntried[0] += 1
+    return True
 
 
 cdef inline void to_pixels(double* d, double cx, double cy, double focal) noexcept nogil:

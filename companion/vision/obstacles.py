@@ -21,6 +21,7 @@ whose legs pass through those OVPs join it (the paper's use of λ3 across corner
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -76,6 +77,7 @@ def find_obstacles(
     params: ObstacleParams | None = None,
     radius_px: float = 10.0,
     leg_gap_frac: float = 0.15,
+    min_leg_angle_deg: float = 12.0,
 ) -> list[Obstacle]:
     """Obstacles from Table-I corners, best supported first: most consistent corner pairs
     (hypotheses of one box from a stray pair are common, from many pairs rare), then the
@@ -95,7 +97,7 @@ def find_obstacles(
     p = params or ObstacleParams()
     found = find(segments, corners.points_px, corners.s, corners.n, corners.r, layout.vps,
                  layout.focal_px, layout.centre[0], layout.centre[1], free, labels, V3, p,
-                 radius_px, leg_gap_frac)
+                 radius_px, leg_gap_frac, math.sin(math.radians(min_leg_angle_deg)))
     obstacles = [Obstacle(*fields) for fields in found]
     obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles

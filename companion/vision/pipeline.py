@@ -182,6 +182,7 @@ class Pipeline:
                 vc.obstacles,
                 radius_px=vc.corners.radius_px,
                 leg_gap_frac=vc.corners.leg_gap_frac,
+                min_leg_angle_deg=vc.corners.min_leg_angle_deg,
             )
             if layout.found
             else []

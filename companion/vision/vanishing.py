@@ -5,8 +5,10 @@ that needs no calibration beyond a rough focal length and never divides by zero:
 
 1. **V3, vertical.** Near-vertical segments vote: every pairwise intersection of the
    longest ones, and the point at infinity straight down the image, is a hypothesis,
-   scored MSAC-style by the length of the segments that point at it; the best is refined
-   by least squares over its inliers.
+   scored MSAC-style by the length of the segments that point at it. The best few
+   (``vertical_alternatives``) and straight down (a level camera) are each refined by
+   least squares over their inliers and completed into a frame (steps 2–3); the frame
+   with the most support, V3's and V1's and V2's together, is the layout.
 2. **Horizontal VPs.** Every horizontal direction in the world images onto the horizon,
    the line polar to V3. Each remaining segment crosses the horizon at one point, which is
    the VP it would have if it were a horizontal edge; that point is a single angle θ (the
