@@ -424,24 +424,22 @@ cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1]
     cdef double[::1] peaks = np.empty(2 * p.max_horizontal_vps)
     cdef int npk = histogram_peaks(theta, lengths, use, p, peaks)
 
-    # Each peak refined (twice) without the horizon constraint, then scored.
+    # Peaks in order of height, each refined (twice) without the horizon constraint and
+    # scored; kept when supported, distinct from those kept, and not the vertical VP.
     cdef double[:, ::1] pv = np.empty((max(npk, 1), 3))
-    cdef double[::1] support = np.zeros(max(npk, 1))
-    cdef double t
+    cdef double t, support
+    cands = []
     for k in range(npk):
         t = peaks[k] * DEG2RAD
         for j in range(3):
             pv[k, j] = sin(t) * e1[j] + cos(t) * e2[j]
         for j in range(2):
             refine(ns, lines, &rest[0], focal, p, &pv[k, 0])
+        support = 0.0
         for i in range(n):
             if rest[i]:
-                support[k] += lengths[i] * msac_score(&ns[i, 0], &pv[k, 0], focal, p)
-
-    # Candidates in order of peak height: distinct, and not the vertical VP.
-    cands = []
-    for k in range(npk):
-        if support[k] <= 0:
+                support += lengths[i] * msac_score(&ns[i, 0], &pv[k, 0], focal, p)
+        if support <= 0:
             continue
         if pv[k, 2] < 0:
             for j in range(3):
@@ -456,7 +454,7 @@ cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1]
             continue
         if angle_between_deg(&pv[k, 0], v3) < 45.0:
             continue
-        cands.append((k, support[k]))
+        cands.append((k, support))
         if len(cands) >= p.max_horizontal_vps:
             break
 
