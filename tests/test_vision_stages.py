@@ -347,6 +347,103 @@ def test_a_rug_seen_along_its_diagonal_is_no_unseen_vertical_edge():
                               labels)) == 1
 
 
+def _face_of_rotated_box(yaw_deg=35.0):
+    """One face of a tall box 4 m ahead, ``yaw_deg`` off the view: its two vertical edges
+    and its top and bottom edges (the other face shows nothing). Returns the segments, the
+    face's direction on the floor and the other face's."""
+    a = np.radians(yaw_deg)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.2, 1.2, 4.0])
+    up = np.array([0.0, -2.4, 0.0])
+    b0, b1, t0, t1 = _project([front, front + 0.8 * u, front + up, front + up + 0.8 * u])
+    return np.array([[*b0, *t0], [*b1, *t1], [*t0, *t1], [*b0, *b1]]), u, v
+
+
+def test_a_box_showing_one_face_takes_the_other_ovp_at_a_right_angle():
+    from companion.vision.obstacles import find_obstacles
+
+    segs, u, v = _face_of_rotated_box()
+    labels = np.array([V3, V3, NONE, NONE])
+    found = find_obstacles(segs, find_corners(segs, labels), _level_layout(), labels == NONE,
+                           labels)
+    assert len(found) == 1
+    dirs = direction_of(found[0].ovps[:2], F, C)
+    for face in (u, v):  # the seen face's OVP, and the other at a right angle on the horizon
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+
+
+def test_a_lone_face_needs_a_room_that_vouches_for_the_focal_length():
+    # Its other OVP is taken at a right angle through the focal length: only when the
+    # room's V1 and V2 are both seen, and at a right angle with that focal length.
+    from companion.vision.geometry import point_of
+    from companion.vision.obstacles import find_obstacles
+    from companion.vision.vanishing import LayoutVPs
+
+    segs, _, _ = _face_of_rotated_box()
+    labels = np.array([V3, V3, NONE, NONE])
+
+    def found(v2_azimuth_deg, v2_seen=True):
+        a = np.radians(v2_azimuth_deg)
+        v2 = point_of(np.array([np.sin(a), 0.0, np.cos(a)]), F, C)
+        layout = LayoutVPs(vps=np.array([[1.0, 0.0, 0.0], v2, [0.0, 1.0, 0.0]]),
+                           observed=(True, v2_seen, True), support_px=np.ones(3),
+                           focal_px=F, centre=C)
+        return find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE, labels)
+
+    assert len(found(0.0)) == 1  # V2 straight ahead, V1 to the side: a right angle
+    assert found(5.0) == []  # 85° apart with this focal length: it is not to be trusted
+    assert found(0.0, v2_seen=False) == []  # V2 inferred from V1, which proves nothing
+
+
+def test_legs_of_two_things_at_one_vertical_edge_make_no_single_face():
+    # At both ends of both vertical edges a second leg runs 8° off the face (too close to
+    # the first to make a corner with it): each edge gives two halves on the horizon, 8°
+    # apart, and which of them is a face is anyone's guess.
+    from companion.vision.obstacles import find_obstacles
+
+    segs, _, _ = _face_of_rotated_box()
+    a = np.radians(35.0 + 8.0)
+    w = np.array([np.cos(a), 0.0, np.sin(a)])
+    front = np.array([0.2, 1.2, 4.0])
+    up = np.array([0.0, -2.4, 0.0])
+    corners = [front, front + up, front + 0.8 * _face_of_rotated_box()[1],
+               front + up + 0.8 * _face_of_rotated_box()[1]]
+    extra = [[*p, *q] for p, q in zip(_project(corners), _project([c + 0.5 * w for c in corners]),
+                                      strict=True)]
+    segs = np.vstack([segs, extra])
+    labels = np.array([V3, V3] + [NONE] * 6)
+    assert len(find_corners(segs, labels)) == 0
+    assert find_obstacles(segs, find_corners(segs, labels), _level_layout(), labels == NONE,
+                          labels) == []
+    # Without the second legs it is a face (the test above).
+    assert len(find_obstacles(segs[:4], find_corners(segs[:4], labels[:4]), _level_layout(),
+                              labels[:4] == NONE, labels[:4])) == 1
+
+
+def test_the_stripes_of_a_rug_are_no_face():
+    # A rug on the floor, its two edges across the view and three stripes along it: seen
+    # from the front its stripes can be labelled vertical, and each meets both edges,
+    # which are parallel and cross the horizon at one OVP. Six halves on one OVP: a rug.
+    from companion.vision.geometry import point_of
+    from companion.vision.obstacles import find_obstacles
+    from companion.vision.vanishing import LayoutVPs
+
+    xs = np.array([-0.9, -0.3, 0.3, 0.9])
+    near = _project([[x, 1.2, 2.5] for x in xs])
+    far = _project([[x, 1.2, 3.5] for x in xs])
+    pieces = [[*near[k], *near[k + 1]] for k in range(3)] + \
+             [[*far[k], *far[k + 1]] for k in range(3)]
+    stripes = [[*near[k], *far[k]] for k in (1, 2)]
+    segs = np.array(pieces + stripes)
+    labels = np.array([NONE] * 6 + [V3] * 2)
+    r = np.radians(30.0)  # the room 30° off the rug
+    room = point_of(np.array([[np.cos(r), 0.0, np.sin(r)], [-np.sin(r), 0.0, np.cos(r)]]), F, C)
+    layout = LayoutVPs(vps=np.vstack([room, [0.0, 1.0, 0.0]]), observed=(True, True, True),
+                       support_px=np.ones(3), focal_px=F, centre=C)
+    assert find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE,
+                          labels) == []
+
+
 def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
     from companion.vision.corners import table1_labels
 

@@ -11,6 +11,10 @@ cdef inline double degrees(double radians) noexcept nogil:
     return radians * 57.29577951308232
 
 
+cdef inline double radians(double degrees) noexcept nogil:
+    return degrees * 0.017453292519943295
+
+
 cdef inline void cross3(const double* a, const double* b, double* out) noexcept nogil:
     """``out = a × b``: the line through two points, or the point on two lines."""
     out[0] = a[1] * b[2] - a[2] * b[1]

@@ -4,14 +4,14 @@ the steps described there."""
 
 import numpy as np
 
-from libc.math cimport fabs, hypot, sin, sqrt
+from libc.math cimport fabs, hypot, sin
 from libc.stdlib cimport free, malloc, realloc
 
 from companion.vision._geometry cimport (
     angle_between_deg,
     cross3,
-    dot3,
     norm3,
+    radians,
     segment_line,
     smallest_eigenvector,
     unit3,
@@ -19,8 +19,8 @@ from companion.vision._geometry cimport (
     vp_sin,
 )
 
-cdef double DEG2RAD = 0.017453292519943295
 cdef double INF = float("inf")
+cdef double MIN_SIDE = sin(radians(20.0))  # a leg leaves its vertical edge at 20° or more
 
 
 cdef struct Params:
@@ -29,6 +29,7 @@ cdef struct Params:
     double horizon_tol_deg
     double orthogonal_tol_deg
     double single_corner_orthogonal_tol_deg
+    double single_face_tol_deg
     double non_manhattan_min_deg
     double merge_deg
     double member_angle_deg
@@ -376,7 +377,7 @@ cdef list edge_legs(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
     chains = vertical_chains(s, lengths, lines, verticals, p)
     if free_idx.shape[0] == 0 or not chains:
         return out
-    cdef double min_side = sin(20.0 * DEG2RAD), r2 = p.radius_px * p.radius_px
+    cdef double r2 = p.radius_px * p.radius_px
     cdef double ex, ey, d0, d1, axx, axy, spx, spy, side
     cdef Py_ssize_t j, f, end
     for chain in chains:
@@ -396,7 +397,7 @@ cdef list edge_legs(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
                 side = (axx * spy - axy * spx) / (lengths[f] if lengths[f] > 1e-12 else 1e-12)
                 if d1 < d0:
                     side = -side
-                if fabs(side) >= min_side:
+                if fabs(side) >= MIN_SIDE:
                     legs[end].append((f, 1.0 if side > 0 else -1.0))
         if legs[0] or legs[1]:
             out.append((chain, legs[0], legs[1]))
@@ -460,6 +461,65 @@ cdef void pair_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* foun
             for k in range(4):
                 h.points[k] = a.points[k]
                 h.points[4 + k] = b.points[k]
+
+
+cdef inline bint same_edge(Hypothesis* a, Hypothesis* b) noexcept nogil:
+    """Whether two silhouette halves rest on the same vertical edge (the same two ends)."""
+    cdef int k
+    for k in range(4):
+        if a.points[k] != b.points[k]:
+            return False
+    return True
+
+
+cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* found) except *:
+    """One silhouette OVP alone, the other face's OVP taken at a right angle to it on the
+    horizon (``O2 ∝ O3 × O1`` in directions): a box of which one face shows its two
+    horizontal edges and the other face none. With no second face to be orthogonal to,
+    only the horizon test is left, so it is the tight ``single_face_tol_deg``; the right
+    angle is taken through the focal length, so the room's V1 and V2 must be at one within
+    the same tolerance (a wrong focal length shows there). A face has two outline edges, so
+    three or more halves on one OVP are no face: a striped rug, whose stripes can pass for
+    verticals, also has two parallel edges."""
+    cdef Py_ssize_t i, j, k, agree
+    cdef bint ambiguous
+    cdef double d2[3]
+    cdef Hypothesis* a
+    cdef Hypothesis* h
+    if abs(90.0 - angle_between_deg(fr.l1, fr.l2)) > p.single_face_tol_deg:
+        return
+    for i in range(halves.count):
+        a = &halves.items[i]
+        if horizon_error(fr, a.d1) > p.single_face_tol_deg:
+            continue
+        # A face shows at most its two outline edges, each with one edge of the face at
+        # either end: more halves on one OVP are repeated structure (the stripes of a rug
+        # meeting its two edges), and halves of one vertical edge that disagree are legs
+        # of more than one thing meeting there. Neither is a box.
+        agree = 0
+        ambiguous = False
+        for j in range(halves.count):
+            if angle_between_deg(a.d1, halves.items[j].d1) <= p.merge_deg:
+                agree += 1
+            elif same_edge(a, &halves.items[j]):
+                ambiguous = True
+        if agree > 2 or ambiguous:
+            continue
+        cross3(fr.d3, a.d1, d2)
+        if unit3(d2) <= 0:
+            continue
+        h = new_hypothesis(found)
+        a = &halves.items[i]
+        for k in range(3):
+            h.d1[k] = a.d1[k]
+            h.d2[k] = d2[k]
+        h.lam3 = horizon_error(fr, a.d1)
+        h.edge = a.edge
+        h.legs[0], h.legs[1] = a.legs[0], a.legs[1]
+        h.nlegs = 2
+        for k in range(4):
+            h.points[k] = a.points[k]
+        h.npoints = 2
 
 
 cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list edges,
@@ -556,7 +616,7 @@ cdef void junction_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] 
     cdef double o2[3]
     cdef double d1[3]
     cdef double d2[3]
-    cdef double ex, ey, length, hor, ortho, lam, min_side = sin(20.0 * DEG2RAD)
+    cdef double ex, ey, length, hor, ortho, lam
     cdef Py_ssize_t legs_a[2]
     cdef Py_ssize_t legs_b[2]
     cdef Hypothesis* h
@@ -580,8 +640,8 @@ cdef void junction_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] 
             if len({a1, a2, b1, b2}) < 4:
                 continue
             ex, ey = (xb - xa) / length, (yb - ya) / length
-            if not (_split(s, a1, a2, xa, ya, ex, ey, min_side, legs_a)
-                    and _split(s, b1, b2, xb, yb, ex, ey, min_side, legs_b)):
+            if not (_split(s, a1, a2, xa, ya, ex, ey, MIN_SIDE, legs_a)
+                    and _split(s, b1, b2, xb, yb, ex, ey, MIN_SIDE, legs_b)):
                 continue
             if not (intersect(&lines[legs_a[0], 0], &lines[legs_b[0], 0], o1)
                     and intersect(&lines[legs_a[1], 0], &lines[legs_b[1], 0], o2)):
@@ -767,7 +827,7 @@ cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines
 
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
          double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
-         double radius_px, double leg_gap_frac, double min_leg_sin):
+         double radius_px, double leg_gap_frac, double min_leg_sin, bint room_seen):
     """Obstacles from Table-I corners and vertical edges (see
     :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
     corners_px K×2, pairs, height_px, λ3)."""
@@ -777,6 +837,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.horizon_tol_deg = params.horizon_tol_deg
     p.orthogonal_tol_deg = params.orthogonal_tol_deg
     p.single_corner_orthogonal_tol_deg = params.single_corner_orthogonal_tol_deg
+    p.single_face_tol_deg = params.single_face_tol_deg
     p.non_manhattan_min_deg = params.non_manhattan_min_deg
     p.merge_deg = params.merge_deg
     p.member_angle_deg = params.member_angle_deg
@@ -865,6 +926,8 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         pair_halves(&fr, &p, &halves, &found)
         if found.count == 0:
             edge_horizon_pairs(&fr, &p, lines, edges, &found)
+        if found.count == 0 and room_seen:
+            single_halves(&fr, &p, &halves, &found)
         if found.count == 0:
             return []
         obstacles = []

@@ -1,6 +1,6 @@
 """Compiled loops of the layout-VP stage; the method is described in
-:mod:`companion.vision.vanishing` (paper Fig. 2), which calls :func:`layout_directions`
-and :func:`assign`.
+:mod:`companion.vision.vanishing` (paper Fig. 2), which calls :func:`layout_vps` and
+:func:`assign`.
 
 Segments come in normalised camera coordinates (``(pixel − centre) / focal``), so a VP is
 a 3-D direction and angles between VPs are angles in space.
@@ -16,6 +16,7 @@ from companion.vision._geometry cimport (
     degrees,
     dot3,
     norm3,
+    radians,
     segment_line,
     smallest_eigenvector,
     unit3,
@@ -23,7 +24,6 @@ from companion.vision._geometry cimport (
     vp_sin,
 )
 
-cdef double DEG2RAD = 0.017453292519943295
 
 
 cdef struct Params:
@@ -46,7 +46,7 @@ cdef Params _params(p):
     cdef Params q
     q.residual_px = p.residual_px
     q.max_angle_deg = p.max_angle_deg
-    q.sin_max = 1.0 if p.max_angle_deg >= 90.0 else sin(p.max_angle_deg * DEG2RAD)
+    q.sin_max = 1.0 if p.max_angle_deg >= 90.0 else sin(radians(p.max_angle_deg))
     q.vertical_max_tilt_deg = p.vertical_max_tilt_deg
     q.vertical_hypothesis_segments = p.vertical_hypothesis_segments
     q.vertical_max_camera_tilt_deg = p.vertical_max_camera_tilt_deg
@@ -144,7 +144,7 @@ cdef tuple vertical_hypotheses(double[:, ::1] ns, double[:, ::1] lines, double[:
     each scored MSAC-style against the near-vertical segments (marked in ``is_cand``).
     Returns (hypotheses H×3, scores H), or None with fewer than two candidates."""
     cdef Py_ssize_t n = ns.shape[0], i, j, c, h
-    cdef double min_cos = cos(p.vertical_max_camera_tilt_deg * DEG2RAD)
+    cdef double min_cos = cos(radians(p.vertical_max_camera_tilt_deg))
     cdef Py_ssize_t[::1] cand = np.empty(n, np.intp)
     cdef Py_ssize_t ncand = 0, ntop, tmp
     for i in range(n):
@@ -202,7 +202,7 @@ cdef tuple vertical_hypotheses(double[:, ::1] ns, double[:, ::1] lines, double[:
     cdef double[::1] scores = scores_arr
     cdef double cl, mx, my, ux, uy, cross, t2, r2, score
     cdef double h0, h1, h2, hh, hw0, hw1, ww
-    cdef double sin2 = sin(p.max_angle_deg * DEG2RAD) ** 2
+    cdef double sin2 = sin(radians(p.max_angle_deg)) ** 2
     cdef double scale = focal / (2.0 * p.residual_px)
     for c in range(ncand):
         i = cand[c]
@@ -250,7 +250,7 @@ cdef bint refine_vertical(double[:, ::1] ns, double[:, ::1] lines, double focal,
     ``inl`` its inliers. False (``best`` the default, straight down, and no inliers) when
     fewer than two segments back it or it leans beyond the camera-tilt limit."""
     cdef Py_ssize_t n = ns.shape[0], i, k, count = 0
-    cdef double min_cos = cos(p.vertical_max_camera_tilt_deg * DEG2RAD)
+    cdef double min_cos = cos(radians(p.vertical_max_camera_tilt_deg))
     for k in range(2):
         if not refine(ns, lines, is_cand, focal, p, best):
             break
@@ -430,7 +430,7 @@ cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1]
     cdef double t, support
     cands = []
     for k in range(npk):
-        t = peaks[k] * DEG2RAD
+        t = radians(peaks[k])
         for j in range(3):
             pv[k, j] = sin(t) * e1[j] + cos(t) * e2[j]
         for j in range(2):
@@ -467,7 +467,7 @@ cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1]
     others = []
     if not cands:
         for j in range(3):  # azimuths 90° and 0°: image right and forward
-            d[0, j] = e1[j] * sin(90.0 * DEG2RAD) + e2[j] * cos(90.0 * DEG2RAD)
+            d[0, j] = e1[j] * sin(radians(90.0)) + e2[j] * cos(radians(90.0))
             d[1, j] = e2[j]
     else:
         first, second, v2_seen, others = _choose_layout(cands, pv, d3, p)
@@ -559,7 +559,7 @@ def assign(segments, vps, double max_angle_deg, double residual_px):
     angles_arr = np.empty(n)
     cdef long long[::1] labels = labels_arr
     cdef double[::1] angles = angles_arr
-    cdef double sin_max = 1.0 if max_angle_deg >= 90.0 else sin(max_angle_deg * DEG2RAD)
+    cdef double sin_max = 1.0 if max_angle_deg >= 90.0 else sin(radians(max_angle_deg))
     cdef double ux, uy, tx, ty, u2, t2, cross, s2, best_s2
     for i in range(n):
         ux, uy = s[i, 2] - s[i, 0], s[i, 3] - s[i, 1]

@@ -28,7 +28,7 @@ import numpy as np
 
 from companion.vision._obstacles import find
 from companion.vision.corners import Corners
-from companion.vision.vanishing import V3, LayoutVPs
+from companion.vision.vanishing import V1, V2, V3, LayoutVPs
 
 __all__ = ["ObstacleParams", "Obstacle", "find_obstacles"]
 
@@ -43,6 +43,9 @@ class ObstacleParams:
     orthogonal_tol_deg: float = field(default=20.0, metadata={"range": (0.1, 45.0)})
     """λ3: O1 ⟂ O2 within this (focal length is a guess); a divisor of λ3"""
     single_corner_orthogonal_tol_deg: float = 8.0  # the same when C_h shows no leg
+    single_face_tol_deg: float = 3.0  # when one face is all there is of a box: its OVP this
+    # close to horizontal, and the room's V1 ⟂ V2 this close (its other OVP is at a right
+    # angle through the focal length)
     non_manhattan_min_deg: float = 5.0  # OVPs at least this far from V1 and V2
     merge_deg: float = 3.0  # pairs whose OVPs agree this well are one obstacle
     member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well
@@ -97,7 +100,8 @@ def find_obstacles(
     p = params or ObstacleParams()
     found = find(segments, corners.points_px, corners.s, corners.n, corners.r, layout.vps,
                  layout.focal_px, layout.centre[0], layout.centre[1], free, labels, V3, p,
-                 radius_px, leg_gap_frac, math.sin(math.radians(min_leg_angle_deg)))
+                 radius_px, leg_gap_frac, math.sin(math.radians(min_leg_angle_deg)),
+                 layout.observed[V1] and layout.observed[V2])
     obstacles = [Obstacle(*fields) for fields in found]
     obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles
