@@ -196,13 +196,16 @@ cdef tuple vertical_hypotheses(double[:, ::1] ns, double[:, ::1] lines, double[:
     # Score every hypothesis against every candidate. With midpoint m and direction u of a
     # candidate and h = (x, y, w) a hypothesis, the direction from m to h is t = (x, y) − w·m;
     # u × t and |t|² are linear in products of h's entries, so each candidate's and each
-    # hypothesis's factors are computed once, and the tests compare squares.
-    cdef double[:, ::1] cf = np.empty((ncand, 7))
+    # hypothesis's factors are computed once, the tests compare squares, and the inner loop
+    # runs over contiguous arrays without branches (the compiler vectorises it).
+    factors = np.empty((8, ncand))
+    cdef double[:, ::1] cf = factors
     scores_arr = np.zeros(nh)
     cdef double[::1] scores = scores_arr
-    cdef double cl, mx, my, ux, uy, cross, t2, r2, score
+    cdef double cl, mx, my, ux, uy, cross, t2, r2, score, ok
     cdef double h0, h1, h2, hh, hw0, hw1, ww
     cdef double sin2 = sin(radians(p.max_angle_deg)) ** 2
+    cdef double sin2_f2 = sin2 / (focal * focal)
     cdef double scale = focal / (2.0 * p.residual_px)
     for c in range(ncand):
         i = cand[c]
@@ -211,13 +214,22 @@ cdef tuple vertical_hypotheses(double[:, ::1] ns, double[:, ::1] lines, double[:
         my = 0.5 * (ns[i, 1] + ns[i, 3])
         ux = (ns[i, 2] - ns[i, 0]) / cl
         uy = (ns[i, 3] - ns[i, 1]) / cl
-        cf[c, 0] = -uy
-        cf[c, 1] = ux
-        cf[c, 2] = uy * mx - ux * my
-        cf[c, 3] = mx
-        cf[c, 4] = my
-        cf[c, 5] = (cl * scale) * (cl * scale)
-        cf[c, 6] = cl
+        cf[0, c] = -uy
+        cf[1, c] = ux
+        cf[2, c] = uy * mx - ux * my
+        cf[3, c] = mx
+        cf[4, c] = my
+        cf[5, c] = mx * mx + my * my
+        cf[6, c] = (cl * scale) * (cl * scale)
+        cf[7, c] = cl
+    cdef const double* fa = &cf[0, 0]
+    cdef const double* fb = &cf[1, 0]
+    cdef const double* fc = &cf[2, 0]
+    cdef const double* fx = &cf[3, 0]
+    cdef const double* fy = &cf[4, 0]
+    cdef const double* fm = &cf[5, 0]
+    cdef const double* fr = &cf[6, 0]
+    cdef const double* fl = &cf[7, 0]
     for h in range(nh):
         h0, h1, h2 = hyps[h, 0], hyps[h, 1], hyps[h, 2]
         hh = h0 * h0 + h1 * h1
@@ -226,20 +238,14 @@ cdef tuple vertical_hypotheses(double[:, ::1] ns, double[:, ::1] lines, double[:
         ww = h2 * h2
         score = 0.0
         for c in range(ncand):
-            cross = h0 * cf[c, 0] + h1 * cf[c, 1] + h2 * cf[c, 2]
+            cross = h0 * fa[c] + h1 * fb[c] + h2 * fc[c]
             cross = cross * cross
-            t2 = hh - hw0 * cf[c, 3] - hw1 * cf[c, 4] \
-                + ww * (cf[c, 3] * cf[c, 3] + cf[c, 4] * cf[c, 4])
-            if t2 <= 1e-30:
-                r2 = cf[c, 5]  # t ≈ 0: sin taken as 1
-                if r2 <= 1.0 and sin2 >= 1.0:
-                    score += cf[c, 6] * (1.0 - r2)
-                continue
+            t2 = hh - hw0 * fx[c] - hw1 * fy[c] + ww * fm[c]
             # u has length 1/f here (pixels over pixel length, in normalised coordinates):
             # sin² = cross² f² / |t|², and the residual r = sin · l · scale ≤ 1.
-            r2 = cross * cf[c, 5]
-            if r2 <= t2 and cross * (focal * focal) <= sin2 * t2:
-                score += cf[c, 6] * (1.0 - r2 / t2)
+            r2 = cross * fr[c]
+            ok = (t2 > 1e-30) & (r2 <= t2) & (cross <= sin2_f2 * t2)
+            score += ok * (fl[c] * (1.0 - r2 / (t2 if t2 > 1e-30 else 1.0)))
         scores[h] = score
     return hyps_arr, scores_arr
 
