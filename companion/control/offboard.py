@@ -258,9 +258,9 @@ class _Session:
                     VelocityBodyYawspeed(0.0, 0.0, 0.0, step.yaw_rate_deg_s)))
             self.streaming = step.stream
             if step.request == "start":
-                await self._command(self.offboard._plugin.start, timeout_s=1.5)
+                await self._command(_blocking(self.offboard).start, timeout_s=1.5)
             elif step.request == "stop":
-                await self._command(self.offboard._plugin.stop, timeout_s=1.5)
+                await self._command(_blocking(self.offboard).stop, timeout_s=1.5)
             elif step.request == "release":
                 await self._release()
             if (report_every_s and vehicle.connected and now >= next_report_s
@@ -311,7 +311,7 @@ class _Session:
         if engaged:
             self.ctl.state = sv.SupervisorState("disabled", False)
             await self._announce("companion stopping: yaw rate 0, Hold")
-            await self._command(self.offboard._plugin.stop, timeout_s=STOP_BUDGET_S)
+            await self._command(_blocking(self.offboard).stop, timeout_s=STOP_BUDGET_S)
         for task in self.tasks:
             task.cancel()
         await asyncio.gather(*self.tasks, return_exceptions=True)
@@ -367,6 +367,18 @@ class _Session:
             return None
 
 
+def _blocking(offboard):
+    """The synchronous Offboard plugin underneath an ``OffboardAsync``.
+
+    Its blocking calls are made from threads we own: ``start``/``stop`` wait for a
+    COMMAND_ACK that a lost link may never bring (see ``_Session._command``), and the
+    dead-man must zero the setpoint while the asyncio loop is stalled. MAVSDK 4 exposes
+    it only as ``_plugin``; the SITL tests exercise every use, so a MAVSDK release that
+    renames it fails CI rather than a flight.
+    """
+    return offboard._plugin
+
+
 class _DeadMan:
     """Zero the setpoint from a plain thread if the asyncio loop stops ticking.
 
@@ -399,9 +411,9 @@ class _DeadMan:
             stalled = time.monotonic() - s.last_tick_s > limit_s
             if stalled and s.streaming and not tripped:
                 log.warning("control loop stalled for > %.2f s: yaw rate 0", limit_s)
-                # The synchronous plugin underneath OffboardAsync: the loop is not running.
+                # The loop is not running: the blocking call, from this thread.
                 with contextlib.suppress(MavsdkError):
-                    s.offboard._plugin.set_velocity_body(
+                    _blocking(s.offboard).set_velocity_body(
                         VelocityBodyYawspeed(0.0, 0.0, 0.0, 0.0))
             tripped = stalled
 
