@@ -6,7 +6,7 @@ import numpy as np
 from libc.math cimport fabs, hypot, sqrt
 from libc.stdlib cimport free, malloc, qsort, realloc
 
-from companion.vision._geometry cimport segment_line
+from companion.vision._geometry cimport end_distance, segment_line
 
 cdef double INF = float("inf")
 
@@ -98,13 +98,6 @@ def loose_ends(segments, double radius_px, among=None):
     free(pairs)
     free(rows)
     return out
-
-
-cdef inline double end_distance(double[:, ::1] s, Py_ssize_t i, double x, double y) noexcept nogil:
-    """Distance from (x, y) to the nearer endpoint of segment ``i``."""
-    cdef double a = hypot(s[i, 0] - x, s[i, 1] - y)
-    cdef double b = hypot(s[i, 2] - x, s[i, 3] - y)
-    return a if a < b else b
 
 
 cdef inline double leg_term(double[:, ::1] s, double[::1] lengths, Py_ssize_t i,

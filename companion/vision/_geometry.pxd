@@ -42,7 +42,8 @@ cdef inline double dot3(const double* a, const double* b) noexcept nogil:
 
 cdef inline void segment_line(double x1, double y1, double x2, double y2,
                               double* out) noexcept nogil:
-    """The line through a segment, scaled so ``a² + b² = 1`` (``geometry.segment_lines``)."""
+    """The line through a segment, scaled so ``a² + b² = 1``: ``line · (x, y, 1)`` is the
+    signed distance in pixels from (x, y) to it."""
     out[0] = y1 - y2
     out[1] = x2 - x1
     out[2] = x1 * y2 - x2 * y1
@@ -60,7 +61,7 @@ cdef inline void segment_line(double x1, double y1, double x2, double y2,
 cdef inline double vp_sin(double x1, double y1, double x2, double y2,
                           const double* v) noexcept nogil:
     """|sin| of the angle between a segment and the direction from its midpoint to the
-    homogeneous point ``v`` (``geometry.vp_consistency``); 1 when that is undefined."""
+    homogeneous point ``v``; 1 when that is undefined (the midpoint at ``v``)."""
     cdef double ux = x2 - x1, uy = y2 - y1
     cdef double tx = v[0] - v[2] * (0.5 * (x1 + x2))
     cdef double ty = v[1] - v[2] * (0.5 * (y1 + y2))
@@ -69,6 +70,36 @@ cdef inline double vp_sin(double x1, double y1, double x2, double y2,
         return 1.0
     cdef double s = fabs(ux * ty - uy * tx) / denom
     return 1.0 if s > 1.0 else s
+
+
+cdef inline double end_distance(double[:, ::1] s, Py_ssize_t i, double x,
+                                double y) noexcept nogil:
+    """Distance from (x, y) to the nearer endpoint of segment ``s[i]``."""
+    cdef double a = hypot(s[i, 0] - x, s[i, 1] - y)
+    cdef double b = hypot(s[i, 2] - x, s[i, 3] - y)
+    return a if a < b else b
+
+
+cdef inline double endpoint_weight(const double* s, const double* v) noexcept nogil:
+    """``(L / |t|)²`` for segment ``s`` (x1, y1, x2, y2), ``t`` from its midpoint to ``v``
+    scaled to unit norm: the weight that turns the algebraic residual ``l·v`` of a VP fit
+    into endpoint residuals, so segments near a finite VP do not dominate the fit."""
+    cdef double v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    cdef double tx = v[0] - v[2] * (0.5 * (s[0] + s[2]))
+    cdef double ty = v[1] - v[2] * (0.5 * (s[1] + s[3]))
+    cdef double t2 = tx * tx + ty * ty
+    if t2 < 1e-24 * v2:
+        t2 = 1e-24 * v2
+    return ((s[2] - s[0]) * (s[2] - s[0]) + (s[3] - s[1]) * (s[3] - s[1])) * v2 / t2
+
+
+cdef inline void pixel_point(double f, double cx, double cy, const double* d,
+                             double* out) noexcept nogil:
+    """Unit homogeneous pixel point ``K d`` of a 3-D direction (``out`` may be ``d``)."""
+    out[0] = f * d[0] + cx * d[2]
+    out[1] = f * d[1] + cy * d[2]
+    out[2] = d[2]
+    unit3(out)
 
 
 cdef inline double vp_angle_deg(double sin_value) noexcept nogil:

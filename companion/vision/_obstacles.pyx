@@ -10,7 +10,9 @@ from libc.stdlib cimport free, malloc, realloc
 from companion.vision._geometry cimport (
     angle_between_deg,
     cross3,
-    norm3,
+    end_distance,
+    endpoint_weight,
+    pixel_point,
     radians,
     segment_line,
     smallest_eigenvector,
@@ -94,14 +96,6 @@ cdef inline void direction_of(Frame* fr, const double* p, double* out) noexcept 
     unit3(out)
 
 
-cdef inline void point_of(Frame* fr, const double* d, double* out) noexcept nogil:
-    """Unit homogeneous pixel point ``K d`` of a 3-D direction."""
-    out[0] = fr.f * d[0] + fr.cx * d[2]
-    out[1] = fr.f * d[1] + fr.cy * d[2]
-    out[2] = d[2]
-    unit3(out)
-
-
 cdef inline bint intersect(const double* a, const double* b, double* out) noexcept nogil:
     """``a × b`` scaled to unit norm; False (and zero) when the two are the same."""
     cross3(a, b, out)
@@ -127,11 +121,32 @@ cdef inline bint off_layout(Frame* fr, Params* p, const double* d) noexcept nogi
             and angle_between_deg(d, fr.l2) >= p.non_manhattan_min_deg)
 
 
-cdef inline double end_gap(double[:, ::1] s, Py_ssize_t i, double x, double y) noexcept nogil:
-    """Distance from (x, y) to the nearer end of segment ``i``."""
-    cdef double a = hypot(s[i, 0] - x, s[i, 1] - y)
-    cdef double b = hypot(s[i, 2] - x, s[i, 3] - y)
-    return a if a < b else b
+cdef inline bint box_ovps(Frame* fr, Params* p, const double* d1, const double* d2,
+                          double* lam3) noexcept nogil:
+    """Eq. 8 for the two OVP directions of one box: both within ``horizon_tol_deg`` of
+    horizontal, at a right angle within ``orthogonal_tol_deg``, both away from V1 and V2.
+    When they pass, ``lam3`` is λ3: the larger of the horizon error and the orthogonality
+    error scaled to the horizon's tolerance."""
+    cdef double hor, ortho, lam
+    ovp_error(fr, d1, d2, &hor, &ortho)
+    if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg:
+        return False
+    if not (off_layout(fr, p, d1) and off_layout(fr, p, d2)):
+        return False
+    lam = ortho * p.horizon_tol_deg / p.orthogonal_tol_deg
+    lam3[0] = hor if hor > lam else lam
+    return True
+
+
+cdef inline void set_ovps(Hypothesis* h, const double* d1, const double* d2, double lam3,
+                          double edge) noexcept nogil:
+    """A hypothesis's OVP directions, its λ3 and its vertical edge's length."""
+    cdef int k
+    for k in range(3):
+        h.d1[k] = d1[k]
+        h.d2[k] = d2[k]
+    h.lam3 = lam3
+    h.edge = edge
 
 
 cdef bint horizon_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t a, Py_ssize_t b,
@@ -206,15 +221,9 @@ cdef Py_ssize_t partner_legs(double[:, ::1] s, double[:, ::1] lines, double px, 
     Writes them to ``out`` in order; returns their count."""
     cdef double vline[3]
     cdef double q[3]
-    cdef double nrm, qx, qy, ax = (ex - px) / edge, ay = (ey - py) / edge
+    cdef double qx, qy, ax = (ex - px) / edge, ay = (ey - py) / edge
     cdef Py_ssize_t j, f, count = 0
-    vline[0] = py - ey
-    vline[1] = ex - px
-    vline[2] = px * ey - py * ex
-    nrm = hypot(vline[0], vline[1])
-    vline[0] /= nrm
-    vline[1] /= nrm
-    vline[2] /= nrm
+    segment_line(px, py, ex, ey, vline)
     for j in range(free_idx.shape[0]):
         f = free_idx[j]
         if f == leg_s or f == leg_n:
@@ -228,7 +237,7 @@ cdef Py_ssize_t partner_legs(double[:, ::1] s, double[:, ::1] lines, double px, 
             continue
         if (qx - px) * ax + (qy - py) * ay < 0.5 * edge:
             continue
-        if end_gap(s, f, qx, qy) > p.radius_px:
+        if end_distance(s, f, qx, qy) > p.radius_px:
             continue
         out[count] = f
         count += 1
@@ -248,7 +257,7 @@ cdef bint partner_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t le
     cdef double o2[3]
     cdef double e1[3]
     cdef double e2[3]
-    cdef double hor, ortho, lam
+    cdef double lam
     cdef bint found = False, found_real = False, ok1, ok2
     for i in range(nh):
         h = hs[i]
@@ -270,13 +279,8 @@ cdef bint partner_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t le
                     continue
                 direction_of(fr, o1, e1)
                 direction_of(fr, o2, e2)
-                ovp_error(fr, e1, e2, &hor, &ortho)
-                if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg:
+                if not box_ovps(fr, p, e1, e2, &lam):
                     continue
-                if not (off_layout(fr, p, e1) and off_layout(fr, p, e2)):
-                    continue
-                lam = ortho * p.horizon_tol_deg / p.orthogonal_tol_deg
-                lam = hor if hor > lam else lam
                 if found and (found_real or h2 < 0) and lam >= lam3[0]:
                     continue
                 found = True
@@ -378,7 +382,7 @@ cdef list edge_legs(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
     if free_idx.shape[0] == 0 or not chains:
         return out
     cdef double r2 = p.radius_px * p.radius_px
-    cdef double ex, ey, d0, d1, axx, axy, spx, spy, side
+    cdef double ex, ey, d0, d1, axx, axy, side
     cdef Py_ssize_t j, f, end
     for chain in chains:
         xa, ya, xb, yb, length = chain
@@ -392,11 +396,7 @@ cdef list edge_legs(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
                 d1 = (s[f, 2] - ex) * (s[f, 2] - ex) + (s[f, 3] - ey) * (s[f, 3] - ey)
                 if min(d0, d1) > r2 or lengths[f] < p.min_edge_px:
                     continue
-                # The leg leaves the chain end along (its far end − its near end).
-                spx, spy = s[f, 2] - s[f, 0], s[f, 3] - s[f, 1]
-                side = (axx * spy - axy * spx) / (lengths[f] if lengths[f] > 1e-12 else 1e-12)
-                if d1 < d0:
-                    side = -side
+                side = _side(s, f, ex, ey, axx, axy)
                 if fabs(side) >= MIN_SIDE:
                     legs[end].append((f, 1.0 if side > 0 else -1.0))
         if legs[0] or legs[1]:
@@ -439,22 +439,18 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] lines, list edg
 cdef void pair_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* found) except *:
     """Two silhouette OVPs at a right angle (λ3, eq. 8) make an obstacle hypothesis."""
     cdef Py_ssize_t i, j, k
-    cdef double hor, ortho, lam
+    cdef double lam
     cdef Hypothesis* a
     cdef Hypothesis* b
     cdef Hypothesis* h
     for i in range(halves.count):
         for j in range(i + 1, halves.count):
             a, b = &halves.items[i], &halves.items[j]
-            ovp_error(fr, a.d1, b.d1, &hor, &ortho)
-            if ortho > p.orthogonal_tol_deg:
+            # Each half is on the horizon and off V1, V2 already; eq. 8 adds the right angle.
+            if not box_ovps(fr, p, a.d1, b.d1, &lam):
                 continue
-            lam = ortho * p.horizon_tol_deg / p.orthogonal_tol_deg
             h = new_hypothesis(found)
-            h.d1[0], h.d1[1], h.d1[2] = a.d1[0], a.d1[1], a.d1[2]
-            h.d2[0], h.d2[1], h.d2[2] = b.d1[0], b.d1[1], b.d1[2]
-            h.lam3 = hor if hor > lam else lam
-            h.edge = a.edge if a.edge > b.edge else b.edge
+            set_ovps(h, a.d1, b.d1, lam, a.edge if a.edge > b.edge else b.edge)
             h.nlegs = 4
             h.legs[0], h.legs[1], h.legs[2], h.legs[3] = a.legs[0], a.legs[1], b.legs[0], b.legs[1]
             h.npoints = 4
@@ -510,11 +506,7 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
             continue
         h = new_hypothesis(found)
         a = &halves.items[i]
-        for k in range(3):
-            h.d1[k] = a.d1[k]
-            h.d2[k] = d2[k]
-        h.lam3 = horizon_error(fr, a.d1)
-        h.edge = a.edge
+        set_ovps(h, a.d1, d2, horizon_error(fr, a.d1), a.edge)
         h.legs[0], h.legs[1] = a.legs[0], a.legs[1]
         h.nlegs = 2
         for k in range(4):
@@ -556,11 +548,7 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list ed
         if best == INF:
             continue
         h = new_hypothesis(found)
-        for k in range(3):
-            h.d1[k] = b1[k]
-            h.d2[k] = b2[k]
-        h.lam3 = best
-        h.edge = chain[4]
+        set_ovps(h, b1, b2, best, chain[4])
         h.legs[0], h.legs[1] = best_a, best_b
         h.nlegs = 2
         h.points[0], h.points[1], h.points[2], h.points[3] = chain[:4]
@@ -596,7 +584,7 @@ cdef list leg_junctions(double[:, ::1] s, double[:, ::1] lines, double[::1] leng
                     or abs(q[2]) < 1e-12:
                 continue
             x, y = q[0] / q[2], q[1] / q[2]
-            if end_gap(s, a, x, y) > p.radius_px or end_gap(s, b, x, y) > p.radius_px:
+            if end_distance(s, a, x, y) > p.radius_px or end_distance(s, b, x, y) > p.radius_px:
                 continue
             out.append((x, y, a, b))
     return out
@@ -616,7 +604,7 @@ cdef void junction_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] 
     cdef double o2[3]
     cdef double d1[3]
     cdef double d2[3]
-    cdef double ex, ey, length, hor, ortho, lam
+    cdef double ex, ey, length, lam
     cdef Py_ssize_t legs_a[2]
     cdef Py_ssize_t legs_b[2]
     cdef Hypothesis* h
@@ -648,17 +636,10 @@ cdef void junction_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] 
                 continue
             direction_of(fr, o1, d1)
             direction_of(fr, o2, d2)
-            ovp_error(fr, d1, d2, &hor, &ortho)
-            if hor > p.horizon_tol_deg or ortho > p.orthogonal_tol_deg \
-                    or not (off_layout(fr, p, d1) and off_layout(fr, p, d2)):
+            if not box_ovps(fr, p, d1, d2, &lam):
                 continue
-            lam = ortho * p.horizon_tol_deg / p.orthogonal_tol_deg
             h = new_hypothesis(found)
-            for k in range(3):
-                h.d1[k] = d1[k]
-                h.d2[k] = d2[k]
-            h.lam3 = hor if hor > lam else lam
-            h.edge = length
+            set_ovps(h, d1, d2, lam, length)
             h.legs[0], h.legs[1], h.legs[2], h.legs[3] = legs_a[0], legs_b[0], legs_a[1], legs_b[1]
             h.nlegs = 4
             h.points[0], h.points[1], h.points[2], h.points[3] = xa, ya, xb, yb
@@ -726,8 +707,8 @@ cdef void refit_ovp(double[:, ::1] s, double[:, ::1] lines, list legs, const dou
     when fewer than two legs point at it."""
     cdef double a[9]
     cdef double vp[3]
-    cdef double w, t, l, n
-    cdef Py_ssize_t it, k, i, count = 0
+    cdef double w
+    cdef Py_ssize_t it, k, i
     mine = []
     for i in legs:
         if vp_angle_deg(vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], ref_px)) <= max_angle_deg:
@@ -739,12 +720,8 @@ cdef void refit_ovp(double[:, ::1] s, double[:, ::1] lines, list legs, const dou
     for it in range(2):
         for k in range(9):
             a[k] = 0.0
-        n = norm3(vp)
         for i in mine:
-            t = hypot(vp[0] / n - vp[2] / n * (0.5 * (s[i, 0] + s[i, 2])),
-                      vp[1] / n - vp[2] / n * (0.5 * (s[i, 1] + s[i, 3])))
-            l = hypot(s[i, 2] - s[i, 0], s[i, 3] - s[i, 1])
-            w = (l / (t if t > 1e-12 else 1e-12)) ** 2
+            w = endpoint_weight(&s[i, 0], vp)
             for k in range(9):
                 a[k] += w * lines[i, k // 3] * lines[i, k % 3]
         smallest_eigenvector(a, vp)
@@ -768,8 +745,8 @@ cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines
     cdef double e2[3]
     cdef double fit_h, fit_o, ref_h, ref_o, a_s, b_s, a_n, b_n, height = 0.0, lam3 = INF
     cdef Py_ssize_t k, m, i
-    point_of(fr, first.d1, ref1)
-    point_of(fr, first.d2, ref2)
+    pixel_point(fr.f, fr.cx, fr.cy, first.d1, ref1)
+    pixel_point(fr.f, fr.cx, fr.cy, first.d2, ref2)
     paired = set()
     legs = set()
     extra_points = []
@@ -903,19 +880,13 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                     continue
                 nh = partner_legs(s, lines, pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
                                   reach[g], cs[g], cn[g], free_idx, &p, partners)
-                if partner_ovps(&fr, &p, lines, cs[g], cn[g], partners, nh, d1, d2, &lam3):
-                    pass
-                elif reach[g] >= 2 * p.min_edge_px and horizon_ovps(
-                        &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3):
-                    pass  # C_h has no visible leg at all: both OVPs on the horizon
-                else:
+                # With no leg of C_h in sight, both OVPs where C_g's legs cross the horizon.
+                if not (partner_ovps(&fr, &p, lines, cs[g], cn[g], partners, nh, d1, d2, &lam3)
+                        or (reach[g] >= 2 * p.min_edge_px and horizon_ovps(
+                            &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3))):
                     continue
                 h = new_hypothesis(&found)
-                for k in range(3):
-                    h.d1[k] = d1[k]
-                    h.d2[k] = d2[k]
-                h.lam3 = lam3
-                h.edge = reach[g]
+                set_ovps(h, d1, d2, lam3, reach[g])
                 h.corner = g
         # Vertical edges the detector did not see, implied by leg junctions above each other.
         junction_pairs(&fr, &p, s, lines, leg_junctions(s, lines, lengths, free_idx, min_leg_sin,

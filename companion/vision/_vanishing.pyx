@@ -15,7 +15,9 @@ from companion.vision._geometry cimport (
     cross3,
     degrees,
     dot3,
+    endpoint_weight,
     norm3,
+    pixel_point,
     radians,
     segment_line,
     smallest_eigenvector,
@@ -95,18 +97,6 @@ cdef inline bint is_inlier(const double* s, const double* v, double focal,
     if u2 * t2 <= 1e-24:
         return p.sin_max >= 1.0 and u2 * k2 <= 1.0
     return cross * cross <= p.sin_max * p.sin_max * u2 * t2 and cross * cross * k2 <= t2
-
-
-cdef inline double endpoint_weight(const double* s, const double* v) noexcept nogil:
-    """``(L / |t|)²`` for one segment, ``t`` from its midpoint to the unit ``v``: the weight
-    that turns the algebraic residual ``l·v`` of a VP fit into endpoint residuals."""
-    cdef double v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
-    cdef double tx = v[0] - v[2] * (0.5 * (s[0] + s[2]))
-    cdef double ty = v[1] - v[2] * (0.5 * (s[1] + s[3]))
-    cdef double t2 = tx * tx + ty * ty
-    if t2 < 1e-24 * v2:
-        t2 = 1e-24 * v2
-    return ((s[2] - s[0]) * (s[2] - s[0]) + (s[3] - s[1]) * (s[3] - s[1])) * v2 / t2
 
 
 cdef bint refine(double[:, ::1] ns, double[:, ::1] lines, const unsigned char* use,
@@ -385,10 +375,10 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     _, dirs, observed, supports, other_dirs, other_support = best
     cdef double[:, ::1] d = dirs
     for i in range(3):
-        to_pixels(&d[i, 0], cx, cy, focal)
+        pixel_point(focal, cx, cy, &d[i, 0], &d[i, 0])
     cdef double[:, ::1] o = other_dirs
     for i in range(o.shape[0]):
-        to_pixels(&o[i, 0], cx, cy, focal)
+        pixel_point(focal, cx, cy, &o[i, 0], &o[i, 0])
     return dirs, observed, supports, other_dirs, other_support
 
 
@@ -519,13 +509,6 @@ cdef bint new_direction(double[:, ::1] hyps, Py_ssize_t h, double (*tried)[3], i
         tried[ntried[0]][t] = hyps[h, t]
     ntried[0] += 1
     return True
-
-
-cdef inline void to_pixels(double* d, double cx, double cy, double focal) noexcept nogil:
-    """A 3-D direction, in place, as its unit homogeneous pixel point ``K d``."""
-    d[0] = focal * d[0] + cx * d[2]
-    d[1] = focal * d[1] + cy * d[2]
-    unit3(d)
 
 
 cdef _choose_layout(list cands, double[:, ::1] pv, double* d3, Params* p):
