@@ -264,7 +264,6 @@ def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
     # legs at the bottom: both OVPs are where the top legs cross the horizon, which for a
     # level camera (V3 straight down, at infinity) is the centre row.
     from companion.vision.obstacles import find_obstacles
-    from companion.vision.vanishing import LayoutVPs
 
     a = np.radians(35.0)
     u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
@@ -273,9 +272,7 @@ def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
     b, t, t_u, t_v = _project([front, top, top + 0.8 * u, top + 0.8 * v])
     segs = np.array([[*t, *t_u], [*t, *t_v], [*b, *t]])
     labels = np.array([NONE, NONE, V3])
-    layout = LayoutVPs(
-        vps=np.array([[1.0, 0.0, 0.0], [C[0], C[1], 1.0], [0.0, 1.0, 0.0]]),
-        observed=(True, True, True), support_px=np.ones(3), focal_px=F, centre=C)
+    layout = _room_layout()
     corners = find_corners(segs, labels)
     assert len(corners) == 1
     found = find_obstacles(segs, corners, layout, labels == NONE, labels)
@@ -287,12 +284,17 @@ def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 1e-6
 
 
-def _level_layout():
+def _room_layout(yaw_deg=0.0, v2_skew_deg=0.0, v2_seen=True):
+    """The layout of a room ``yaw_deg`` off the view of a level camera (V3 straight down):
+    V1 along the room's x axis, V2 along its z axis turned ``v2_skew_deg`` further (so V1
+    and V2 are that far from a right angle), V2 ``v2_seen`` or inferred."""
+    from companion.vision.geometry import point_of
     from companion.vision.vanishing import LayoutVPs
 
-    return LayoutVPs(
-        vps=np.array([[1.0, 0.0, 0.0], [C[0], C[1], 1.0], [0.0, 1.0, 0.0]]),
-        observed=(True, True, True), support_px=np.ones(3), focal_px=F, centre=C)
+    r, q = np.radians(yaw_deg), np.radians(yaw_deg + v2_skew_deg)
+    room = point_of(np.array([[np.cos(r), 0.0, np.sin(r)], [-np.sin(q), 0.0, np.cos(q)]]), F, C)
+    return LayoutVPs(vps=np.vstack([room, [0.0, 1.0, 0.0]]), observed=(True, v2_seen, True),
+                     support_px=np.ones(3), focal_px=F, centre=C)
 
 
 def test_an_unseen_vertical_edge_is_implied_by_leg_junctions_above_each_other():
@@ -310,7 +312,7 @@ def test_an_unseen_vertical_edge_is_implied_by_leg_junctions_above_each_other():
     labels = np.full(4, NONE)
     no_corners = find_corners(segs, labels)
     assert len(no_corners) == 0
-    found = find_obstacles(segs, no_corners, _level_layout(), labels == NONE, labels)
+    found = find_obstacles(segs, no_corners, _room_layout(), labels == NONE, labels)
     assert len(found) == 1
     dirs = direction_of(found[0].ovps[:2], F, C)
     for face in (u, v):
@@ -321,9 +323,7 @@ def test_a_rug_seen_along_its_diagonal_is_no_unseen_vertical_edge():
     # A rug 30° off the room, its near and far corners one above the other in the image:
     # two leg junctions along V3, but the legs on one side are two different edges, which
     # meet at the rug's side corner on the floor, not on the horizon.
-    from companion.vision.geometry import point_of
     from companion.vision.obstacles import find_obstacles
-    from companion.vision.vanishing import LayoutVPs
 
     a = np.radians(45.0)  # its diagonal along the view
     u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
@@ -332,10 +332,7 @@ def test_a_rug_seen_along_its_diagonal_is_no_unseen_vertical_edge():
     assert abs(n[0] - f[0]) < 1e-6  # the two corners share an image column
     segs = np.array([[*n, *lft], [*n, *rgt], [*f, *lft], [*f, *rgt]])
     labels = np.full(4, NONE)
-    r = np.radians(15.0)  # the room 30° off the rug, so its edges are free legs
-    room = point_of(np.array([[np.cos(r), 0.0, np.sin(r)], [-np.sin(r), 0.0, np.cos(r)]]), F, C)
-    layout = LayoutVPs(vps=np.vstack([room, [0.0, 1.0, 0.0]]), observed=(True, True, True),
-                       support_px=np.ones(3), focal_px=F, centre=C)
+    layout = _room_layout(15.0)  # the room 30° off the rug, so its edges are free legs
     assert find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE,
                           labels) == []
     # Mirrored above the horizon, the near corner's legs are the faces of a box standing
@@ -364,7 +361,7 @@ def test_a_box_showing_one_face_takes_the_other_ovp_at_a_right_angle():
 
     segs, u, v = _face_of_rotated_box()
     labels = np.array([V3, V3, NONE, NONE])
-    found = find_obstacles(segs, find_corners(segs, labels), _level_layout(), labels == NONE,
+    found = find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
                            labels)
     assert len(found) == 1
     dirs = direction_of(found[0].ovps[:2], F, C)
@@ -375,23 +372,17 @@ def test_a_box_showing_one_face_takes_the_other_ovp_at_a_right_angle():
 def test_a_lone_face_needs_a_room_that_vouches_for_the_focal_length():
     # Its other OVP is taken at a right angle through the focal length: only when the
     # room's V1 and V2 are both seen, and at a right angle with that focal length.
-    from companion.vision.geometry import point_of
     from companion.vision.obstacles import find_obstacles
-    from companion.vision.vanishing import LayoutVPs
 
     segs, _, _ = _face_of_rotated_box()
     labels = np.array([V3, V3, NONE, NONE])
 
-    def found(v2_azimuth_deg, v2_seen=True):
-        a = np.radians(v2_azimuth_deg)
-        v2 = point_of(np.array([np.sin(a), 0.0, np.cos(a)]), F, C)
-        layout = LayoutVPs(vps=np.array([[1.0, 0.0, 0.0], v2, [0.0, 1.0, 0.0]]),
-                           observed=(True, v2_seen, True), support_px=np.ones(3),
-                           focal_px=F, centre=C)
+    def found(v2_skew_deg, v2_seen=True):
+        layout = _room_layout(v2_skew_deg=v2_skew_deg, v2_seen=v2_seen)
         return find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE, labels)
 
     assert len(found(0.0)) == 1  # V2 straight ahead, V1 to the side: a right angle
-    assert found(5.0) == []  # 85° apart with this focal length: it is not to be trusted
+    assert found(-5.0) == []  # 85° apart with this focal length: it is not to be trusted
     assert found(0.0, v2_seen=False) == []  # V2 inferred from V1, which proves nothing
 
 
@@ -401,22 +392,21 @@ def test_legs_of_two_things_at_one_vertical_edge_make_no_single_face():
     # apart, and which of them is a face is anyone's guess.
     from companion.vision.obstacles import find_obstacles
 
-    segs, _, _ = _face_of_rotated_box()
+    segs, u, _ = _face_of_rotated_box()
     a = np.radians(35.0 + 8.0)
     w = np.array([np.cos(a), 0.0, np.sin(a)])
     front = np.array([0.2, 1.2, 4.0])
     up = np.array([0.0, -2.4, 0.0])
-    corners = [front, front + up, front + 0.8 * _face_of_rotated_box()[1],
-               front + up + 0.8 * _face_of_rotated_box()[1]]
+    corners = [front, front + up, front + 0.8 * u, front + up + 0.8 * u]
     extra = [[*p, *q] for p, q in zip(_project(corners), _project([c + 0.5 * w for c in corners]),
                                       strict=True)]
     segs = np.vstack([segs, extra])
     labels = np.array([V3, V3] + [NONE] * 6)
     assert len(find_corners(segs, labels)) == 0
-    assert find_obstacles(segs, find_corners(segs, labels), _level_layout(), labels == NONE,
+    assert find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
                           labels) == []
     # Without the second legs it is a face (the test above).
-    assert len(find_obstacles(segs[:4], find_corners(segs[:4], labels[:4]), _level_layout(),
+    assert len(find_obstacles(segs[:4], find_corners(segs[:4], labels[:4]), _room_layout(),
                               labels[:4] == NONE, labels[:4])) == 1
 
 
@@ -424,9 +414,7 @@ def test_the_stripes_of_a_rug_are_no_face():
     # A rug on the floor, its two edges across the view and three stripes along it: seen
     # from the front its stripes can be labelled vertical, and each meets both edges,
     # which are parallel and cross the horizon at one OVP. Six halves on one OVP: a rug.
-    from companion.vision.geometry import point_of
     from companion.vision.obstacles import find_obstacles
-    from companion.vision.vanishing import LayoutVPs
 
     xs = np.array([-0.9, -0.3, 0.3, 0.9])
     near = _project([[x, 1.2, 2.5] for x in xs])
@@ -436,10 +424,7 @@ def test_the_stripes_of_a_rug_are_no_face():
     stripes = [[*near[k], *far[k]] for k in (1, 2)]
     segs = np.array(pieces + stripes)
     labels = np.array([NONE] * 6 + [V3] * 2)
-    r = np.radians(30.0)  # the room 30° off the rug
-    room = point_of(np.array([[np.cos(r), 0.0, np.sin(r)], [-np.sin(r), 0.0, np.cos(r)]]), F, C)
-    layout = LayoutVPs(vps=np.vstack([room, [0.0, 1.0, 0.0]]), observed=(True, True, True),
-                       support_px=np.ones(3), focal_px=F, centre=C)
+    layout = _room_layout(30.0)  # the room 30° off the rug
     assert find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE,
                           labels) == []
 
