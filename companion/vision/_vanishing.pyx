@@ -374,12 +374,66 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
                 best = frame
     _, dirs, observed, supports, other_dirs, other_support = best
     cdef double[:, ::1] d = dirs
+    polish(ns, lines, focal, &p, d, observed, other_dirs)
     for i in range(3):
         pixel_point(focal, cx, cy, &d[i, 0], &d[i, 0])
     cdef double[:, ::1] o = other_dirs
     for i in range(o.shape[0]):
         pixel_point(focal, cx, cy, &o[i, 0], &o[i, 0])
     return dirs, observed, supports, other_dirs, other_support
+
+
+cdef void polish(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* p,
+                 double[:, ::1] d, tuple observed, double[:, ::1] others):
+    """Refit each observed layout VP (rows of ``d``: V1, V2, V3) on the segments that
+    point at it better than at any other VP found (layout or obstacle), in place.
+
+    The earlier fits share segments: every segment within the thresholds of a VP weighs
+    on it, so a nearby family of parallel edges (a road beside a building, a rotated
+    obstacle) pulls a layout VP towards itself. Here each segment is given to one VP, the
+    one it points at most closely (as :func:`assign` labels segments), and each VP is
+    refined twice over its own. An inferred V2 is completed again ⟂ V1, V3."""
+    cdef Py_ssize_t n = ns.shape[0], i, k, j
+    cdef Py_ssize_t nv = 3 + others.shape[0]
+    cdef double[:, ::1] v = np.empty((nv, 3))
+    for k in range(3):
+        for j in range(3):
+            v[k, j] = d[k, j]
+    for k in range(others.shape[0]):
+        for j in range(3):
+            v[3 + k, j] = others[k, j]
+    cdef unsigned char[:, ::1] own = np.zeros((3, max(n, 1)), np.uint8)
+    cdef double best, sn
+    cdef Py_ssize_t label
+    for i in range(n):
+        best, label = 2.0, -1
+        for k in range(nv):
+            if k < 3 and not observed[k]:
+                continue
+            if not is_inlier(&ns[i, 0], &v[k, 0], focal, p):
+                continue
+            sn = vp_sin(ns[i, 0], ns[i, 1], ns[i, 2], ns[i, 3], &v[k, 0])
+            if sn < best:
+                best, label = sn, k
+        if 0 <= label < 3:
+            own[label, i] = 1
+    cdef double pt[3]
+    for k in range(3):
+        if not observed[k]:
+            continue
+        for j in range(2):
+            refine(ns, lines, &own[k, 0], focal, p, &d[k, 0])
+        if dot3(&d[k, 0], &v[k, 0]) < 0:  # keep the sign conventions of the first fit
+            for j in range(3):
+                d[k, j] = -d[k, j]
+    if observed[0] and not observed[1]:
+        cross3(&d[2, 0], &d[0, 0], pt)
+        if unit3(pt) > 0:
+            if pt[2] < 0:
+                for j in range(3):
+                    pt[j] = -pt[j]
+            for j in range(3):
+                d[1, j] = pt[j]
 
 
 cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengths,

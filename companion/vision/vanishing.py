@@ -19,6 +19,11 @@ that needs no calibration beyond a rough focal length and never divides by zero:
 3. **Layout.** V1, V2 are the best supported pair of horizontal VPs that are orthogonal
    within a tolerance (V2 is inferred from V1 when only one axis is seen); V1 (the LMVP)
    is the better supported of the two. Other peaks are kept as obstacle-VP candidates.
+4. **Polish.** Until here a segment weighs on every VP whose thresholds it passes, so a
+   family of edges a few degrees off a layout axis (a rotated obstacle, a road beside a
+   building) pulls that VP. Each segment is now given to the one VP it points at best,
+   layout or candidate (as :func:`assign_segments` labels them), and each observed
+   layout VP is refined on its own segments.
 
 All VPs are homogeneous pixel coordinates (unit-norm 3-vectors); see
 :mod:`companion.vision.geometry`.
