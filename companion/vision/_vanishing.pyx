@@ -28,6 +28,10 @@ from companion.vision._geometry cimport (
 
 
 
+cdef double SAME_V3_DEG = 0.1
+"""refined V3s closer than this complete into the same frame"""
+
+
 cdef struct Params:
     double residual_px
     double max_angle_deg
@@ -344,7 +348,10 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     cdef unsigned char[::1] inl = np.zeros(n, np.uint8)
     cdef double v3[3]
     cdef double tried[16][3]
-    cdef int ntried = 0
+    cdef double refined[16][3]
+    cdef int ntried = 0, nrefined = 0
+    cdef bint default_done = False, seen_before
+    cdef double[:, ::1] hv
     cdef bint ok
     scored = vertical_hypotheses(ns, lines, lengths, focal, &p, is_cand)
     best = None
@@ -353,6 +360,7 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
         best = horizontal_frame(ns, lines, lengths, focal, &p, v3, False, inl)
     else:
         hyps, scores = scored
+        hv = hyps
         # The best-scored distinct hypotheses, then straight down (hypothesis 0: a level
         # camera) if it is not one of them: the true verticals can be few and short where
         # long oblique lines meet below the image.
@@ -361,14 +369,22 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
         for h in np.argsort(-scores, kind="stable").tolist():
             if len(chosen) == alternatives:
                 break
-            if new_direction(hyps, h, tried, &ntried, p.min_vp_separation_deg):
+            if new_direction(&hv[h, 0], tried, &ntried, p.min_vp_separation_deg):
                 chosen.append(h)
-        if new_direction(hyps, 0, tried, &ntried, p.min_vp_separation_deg):
+        if new_direction(&hv[0, 0], tried, &ntried, p.min_vp_separation_deg):
             chosen.append(0)
         for h in chosen:
             for k in range(3):
-                v3[k] = hyps[h, k]
+                v3[k] = hv[h, k]
             ok = refine_vertical(ns, lines, focal, &p, &is_cand[0], v3, inl)
+            # Distinct hypotheses often refine to the same V3 (the same inliers); their
+            # frames would be the same frame, so each V3 is completed once.
+            if ok:
+                seen_before = not new_direction(v3, refined, &nrefined, SAME_V3_DEG)
+            else:  # V3 the default, straight down, without inliers
+                seen_before, default_done = default_done, True
+            if seen_before:
+                continue
             frame = horizontal_frame(ns, lines, lengths, focal, &p, v3, ok, inl)
             if best is None or frame[0] > best[0]:
                 best = frame
@@ -551,17 +567,17 @@ cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1]
             np.array([w for _, w in others], dtype=float))
 
 
-cdef bint new_direction(double[:, ::1] hyps, Py_ssize_t h, double (*tried)[3], int* ntried,
-                        double min_deg) noexcept:
-    """Whether hypothesis ``h`` is at least ``min_deg`` from every direction in ``tried``;
-    if so it is added to them."""
+cdef bint new_direction(const double* d, double (*seen)[3], int* nseen,
+                        double min_deg) noexcept nogil:
+    """Whether the unit direction ``d`` is at least ``min_deg`` from every direction in
+    ``seen``; if so it is added to them (room for 16)."""
     cdef int t
-    for t in range(ntried[0]):
-        if angle_between_deg(&hyps[h, 0], tried[t]) < min_deg:
+    for t in range(nseen[0]):
+        if angle_between_deg(d, seen[t]) < min_deg:
             return False
     for t in range(3):
-        tried[ntried[0]][t] = hyps[h, t]
-    ntried[0] += 1
+        seen[nseen[0]][t] = d[t]
+    nseen[0] += 1
     return True
 
 

@@ -68,7 +68,7 @@ class VPParams:
     """longest candidates whose pairs are V3 hypotheses"""
     vertical_max_camera_tilt_deg: float = field(default=35.0, metadata={"range": (1.0, 89.0)})
     """V3 within this of the camera's down axis"""
-    vertical_alternatives: int = field(default=2, metadata={"range": (1, 16)})
+    vertical_alternatives: int = field(default=4, metadata={"range": (1, 16)})
     """distinct V3 hypotheses each completed into a frame"""
     histogram_bin_deg: float = field(default=0.5, metadata={"range": (0.05, 10.0)})
     histogram_sigma_deg: float = field(default=1.0, metadata={"range": (0.05, 10.0)})
