@@ -66,6 +66,17 @@ def test_layout_vps_match_the_room_axes():
         assert angle_between_directions_deg(found[k][None], true).min() < 1.0
 
 
+@pytest.mark.parametrize("hfov_deg", [50.0, 70.0, 100.0])
+def test_without_a_focal_length_it_is_estimated_from_the_room(hfov_deg):
+    # Neither of the guesses (half the width, the width) is the camera's focal length.
+    scene, cam = sample_scene()
+    cam = replace(cam, hfov_deg=hfov_deg, yaw_deg=20.0, pitch_deg=4.0)
+    image, _ = render(scene, cam)
+    est = Pipeline()(image)
+    assert est.focal_source == "estimated"
+    assert est.focal_px == pytest.approx(cam.focal_px, rel=0.02)
+
+
 def test_empty_frame_with_no_lines():
     est = Pipeline()(np.zeros((480, 640, 3), np.uint8))
     assert est.eta_deg is None and est.phi_deg is None

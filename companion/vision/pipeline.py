@@ -33,6 +33,16 @@ __all__ = ["Estimate", "Pipeline", "STAGES"]
 
 STAGES = ("lines", "vps", "corners", "obstacles", "heading")
 
+SELF_CALIBRATION_TOL = 0.1
+"""relative change of the estimated focal length when the VPs are found again with it"""
+
+
+def _orthogonal_focal(layout: LayoutVPs, centre: np.ndarray) -> float | None:
+    """The focal length that makes the observed V1 and V2 orthogonal, None without both."""
+    if not (layout.observed[V1] and layout.observed[V2]):
+        return None
+    return focal_from_orthogonal_vps(layout.vps[V1], layout.vps[V2], centre)
+
 
 @dataclass(frozen=True)
 class Estimate:
@@ -107,23 +117,32 @@ class Pipeline:
         ``given``: configured. Otherwise self-calibration: V1 and V2 found with the
         assumed focal length (half the width, then the width) are orthogonal in space, so
         when both are finite they fix ``f`` (:func:`focal_from_orthogonal_vps`); the VPs
-        are then found again with it (``estimated``). Else ``assumed``. With a given
-        focal length V1 ⟂ V2 is checked with the tighter ``known_focal_orthogonal_tol_deg``.
+        are then found again with it (``estimated``). An estimate is taken at once when
+        the VPs found with it give it back (within ``SELF_CALIBRATION_TOL``), else only
+        if no guess does better. Else ``assumed``. With a given focal length V1 ⟂ V2 is
+        checked with the tighter ``known_focal_orthogonal_tol_deg``.
         """
         vp = self.config.vision.vanishing
         if self.config.camera.focal_px:
             return detect_layout_vps(segments, w, h, self.config.camera.focal_px,
                                      self._known_focal_vp), "given"
         centre = principal_point(w, h)
-        first = None
+        first = unconfirmed = None
         for guess in (w / 2.0, float(w)):
             layout = detect_layout_vps(segments, w, h, guess, vp)
             first = first or layout
-            if not (layout.observed[V1] and layout.observed[V2]):
+            f = _orthogonal_focal(layout, centre)
+            if f is None or not 0.3 * w <= f <= 3.0 * w:
                 continue
-            f = focal_from_orthogonal_vps(layout.vps[V1], layout.vps[V2], centre)
-            if f is not None and 0.3 * w <= f <= 3.0 * w:
-                return detect_layout_vps(segments, w, h, f, vp), "estimated"
+            again = detect_layout_vps(segments, w, h, f, vp)
+            f_again = _orthogonal_focal(again, centre)
+            # A frame picked under a wrong guess can imply a focal length under which a
+            # different frame wins; a true estimate is a fixed point.
+            if f_again is not None and abs(f_again - f) <= SELF_CALIBRATION_TOL * f:
+                return again, "estimated"
+            unconfirmed = unconfirmed or again
+        if unconfirmed is not None:
+            return unconfirmed, "estimated"
         return first, "assumed"
 
     def segments(self, frame: np.ndarray) -> np.ndarray:
