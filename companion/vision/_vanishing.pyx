@@ -276,7 +276,9 @@ cdef int histogram_peaks(double[::1] theta, double[::1] weights, unsigned char[:
     histogram of ``theta``, highest first, at most ``len(peaks)``; returns their count."""
     cdef int nbins = <int>(180.0 / p.histogram_bin_deg + 0.5)
     cdef int half = <int>ceil(3 * p.histogram_sigma_deg / p.histogram_bin_deg)
-    cdef double[::1] hist = np.zeros(nbins)
+    # ``hist`` is circular: bin b is stored at b + half, with ``half`` bins of wrap-around
+    # either side, so the smoothing loop needs no modulo.
+    cdef double[::1] hist = np.zeros(nbins + 2 * half)
     cdef double[::1] smooth = np.zeros(nbins)
     cdef double[::1] kern = np.empty(2 * half + 1)
     cdef Py_ssize_t i, m, b
@@ -284,7 +286,10 @@ cdef int histogram_peaks(double[::1] theta, double[::1] weights, unsigned char[:
     for i in range(theta.shape[0]):
         if use[i]:
             b = (<Py_ssize_t>(theta[i] / p.histogram_bin_deg)) % nbins
-            hist[b] += weights[i]
+            hist[b + half] += weights[i]
+    for m in range(half):
+        hist[m] = hist[nbins + m]
+        hist[nbins + half + m] = hist[half + m]
     for m in range(2 * half + 1):
         x = (m - half) * p.histogram_bin_deg / p.histogram_sigma_deg
         kern[m] = exp(-0.5 * x * x)
@@ -292,7 +297,7 @@ cdef int histogram_peaks(double[::1] theta, double[::1] weights, unsigned char[:
     for i in range(nbins):
         x = 0.0
         for m in range(2 * half + 1):
-            x += hist[(i + m - half + nbins) % nbins] * kern[m]
+            x += hist[i + m] * kern[m]
         smooth[i] = x
         total += x
     if total <= 0:
