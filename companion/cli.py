@@ -76,6 +76,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="YUD split (default test; tune on train only)")
     ev.add_argument("--no-peer", action="store_true",
                     help="with --yud: do not run the peer lu-vp-detect even if installed")
+    ev.add_argument("--variants", action="store_true",
+                    help="with --yud: also zoomed and rolled views of the photographs "
+                         "(focal length given), to develop on the train split")
     return ap
 
 
@@ -208,6 +211,8 @@ def run_eval(args) -> int:
 
     if args.yud:
         return run_eval_yud(args)
+    if args.variants:
+        raise UserError("--variants needs --yud DIR (views of the York Urban DB photographs)")
     if args.scenes < 1:
         raise UserError("--scenes must be at least 1")
     cfg = _config(args.eval_config, None)
@@ -236,6 +241,23 @@ def run_eval(args) -> int:
     return 0
 
 
+def _eval_yud_variants(args, cfg: Config, start: float) -> int:
+    from sitl.yud import area_under_curve, evaluate_yud_variants, format_variants
+
+    errors = evaluate_yud_variants(args.yud, args.split, cfg)
+    print(f"York Urban DB, {args.split} split, focal length given: layout VPs on the "
+          "photographs and on zoomed and rolled views of them")
+    for line in format_variants(errors):
+        print(line)
+    print(f"({time.perf_counter() - start:.0f} s; companion eval --yud {args.yud} "
+          f"--split {args.split} --variants)")
+    if args.json:
+        with _open_output(args.json, "figures") as f:
+            json.dump({name: [round(area_under_curve(e, th), 2) for th in (3.0, 5.0, 10.0)]
+                       for name, e in errors.items()}, f, indent=2)
+    return 0
+
+
 def run_eval_yud(args) -> int:
     """``companion eval --yud DIR``: layout VPs on real photographs, focal given and not,
     beside the peer lu-vp-detect when it is installed."""
@@ -247,6 +269,8 @@ def run_eval_yud(args) -> int:
         raise UserError(f"{folder}: no yud.json here (expected the converted York Urban DB)")
     cfg = _config(args.eval_config, None)
     start = time.perf_counter()
+    if args.variants:
+        return _eval_yud_variants(args, cfg, start)
     reports, peer_missing = [], None
     for given in (True, False):
         reports.append(evaluate_yud(folder, args.split, given, cfg))

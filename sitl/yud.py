@@ -22,8 +22,9 @@ from companion.config import Config
 from companion.vision.pipeline import Pipeline
 from companion.vision.vanishing import NONE, assign_segments
 
-__all__ = ["YudReport", "angular_errors_deg", "area_under_curve", "evaluate_yud",
-           "evaluate_yud_lu", "format_yud", "speed_side_by_side"]
+__all__ = ["VARIANTS", "YudReport", "angular_errors_deg", "area_under_curve", "evaluate_yud",
+           "evaluate_yud_lu", "evaluate_yud_variants", "format_yud", "format_variants",
+           "speed_side_by_side", "zoom_roll"]
 
 THRESHOLDS_DEG = (3.0, 5.0, 10.0)
 
@@ -246,4 +247,84 @@ def format_yud(reports: list[YudReport]) -> list[str]:
             f"{r.method:<14}{focal:<10}{f['images']:>7}{f['aa3']:>8.1f}"
             f"{f['aa5']:>8.1f}{f['aa10']:>8.1f}{f['median_err_deg']:>8.2f}°"
             f"{f['ms_per_image']:>8.1f}{pr:>13}  {est if not r.focal_given else '—'}")
+    return lines
+
+
+# Harder views of the same photographs, for developing on the train split without
+# touching the test split: (zoom, roll in degrees) about the principal point. A zoom
+# narrows the view (fewer, shorter, blurrier lines per axis); a roll tilts every VP.
+# Each zoom is large enough for its roll that the view stays inside the photograph.
+VARIANTS: dict[str, tuple[float, float]] = {
+    "zoom 1.5": (1.5, 0.0),
+    "zoom 2": (2.0, 0.0),
+    "roll +8°": (1.45, 8.0),
+    "roll -8°": (1.45, -8.0),
+    "roll 15°": (1.8, 15.0),
+}
+
+
+def zoom_roll(image: np.ndarray, focal_px: float, principal_point: np.ndarray, zoom: float,
+              roll_deg: float) -> tuple[np.ndarray, float, np.ndarray]:
+    """The view of a camera rolled by ``roll_deg`` (clockwise in the image) about its
+    optical axis, with its focal length ×``zoom``, as a same-size image centred on the
+    principal point.
+
+    Returns (image, focal length in pixels, R): R (3×3) takes a direction in the
+    original camera frame (x right, y down, z forward) to the new one, so the new
+    image's VP of direction d is ``K' R d`` with ``K'`` the new focal length and the
+    image centre ``((w - 1) / 2, (h - 1) / 2)``.
+    """
+    h, w = image.shape[:2]
+    a = np.radians(roll_deg)
+    rot2 = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    # x' = zoom · rot2 (x - pp) + centre, the pinhole's image of R d for every pixel.
+    warp = np.c_[zoom * rot2, centre - zoom * rot2 @ np.asarray(principal_point, float)]
+    out = cv2.warpAffine(image, warp, (w, h), flags=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REFLECT)
+    r = np.eye(3)
+    r[:2, :2] = rot2
+    return out, zoom * focal_px, r
+
+
+def evaluate_yud_variants(folder: str | Path, split: str = "train",
+                          config: Config | None = None,
+                          limit: int | None = None) -> dict[str, np.ndarray]:
+    """Layout-VP errors (deg, three per image), focal length given, on the photographs
+    as they are (``"as is"``) and on each of :data:`VARIANTS`."""
+    yud = _load(folder, split, limit)
+    cfg = config or Config()
+    k = np.linalg.inv(yud.k_inv)
+    out: dict[str, np.ndarray] = {}
+    for name, (zoom, roll) in {"as is": (1.0, 0.0), **VARIANTS}.items():
+        errors = []
+        for im in yud.images:
+            image = yud.read(im)
+            h, w = image.shape[:2]
+            if name == "as is":
+                view, focal, r, centre = image, yud.f_true, np.eye(3), k[:2, 2]
+            else:
+                view, focal, r = zoom_roll(image, yud.f_true, k[:2, 2], zoom, roll)
+                centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+            pipeline = Pipeline(replace(cfg, camera=replace(cfg.camera, focal_px=focal)))
+            layout, _ = pipeline.layout(view)
+            k_view = np.array([[focal, 0, centre[0]], [0, focal, centre[1]], [0, 0, 1.0]])
+            dirs = [np.linalg.solve(k_view, v) for v in layout.vps[list(layout.usable_rows)]]
+            truth = (r @ np.asarray(im["vps_dir"], dtype=float).T).T
+            errors.extend(angular_errors_deg(truth, dirs))
+        out[name] = np.asarray(errors)
+    return out
+
+
+def format_variants(errors: dict[str, np.ndarray]) -> list[str]:
+    """A table, one row per variant, and the mean of the rows."""
+    lines = [f"{'view':<12}{'AA@3°':>8}{'AA@5°':>8}{'AA@10°':>8}{'median':>9}"]
+    rows = []
+    for name, e in errors.items():
+        row = [area_under_curve(e, th) for th in THRESHOLDS_DEG]
+        rows.append(row)
+        lines.append(f"{name:<12}" + "".join(f"{x:>8.1f}" for x in row)
+                     + f"{float(np.median(e)):>8.2f}°")
+    mean = np.mean(rows, axis=0)
+    lines.append(f"{'mean':<12}" + "".join(f"{x:>8.1f}" for x in mean))
     return lines

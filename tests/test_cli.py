@@ -229,6 +229,7 @@ def test_bench_and_sim_reject_bad_arguments_in_one_line():
     _assert_one_line_error(run("bench", "--resolutions", "640by480", "--no-sitl"), "WxH")
     _assert_one_line_error(run("bench", "--latency-frames", "0"), "--latency-frames")
     _assert_one_line_error(run("sim", "--eta0", "120"), "between -89 and 89")
+    _assert_one_line_error(run("eval", "--variants"), "--variants needs --yud")
 
 
 def test_dry_run_needs_no_mavlink_packages(sample_video):

@@ -5,7 +5,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sitl.yud import angular_errors_deg, area_under_curve, evaluate_yud
+from sitl.yud import (
+    VARIANTS,
+    angular_errors_deg,
+    area_under_curve,
+    evaluate_yud,
+    evaluate_yud_variants,
+    zoom_roll,
+)
 
 YUD = Path(__file__).resolve().parents[2] / "shared" / "data" / "yud"
 
@@ -31,6 +38,38 @@ def test_a_2_degree_error_gives_the_known_aa():
 def test_sign_free_and_nothing_estimated():
     assert angular_errors_deg(np.eye(3)[:1], -np.eye(3)[:1])[0] == pytest.approx(0.0)
     assert list(angular_errors_deg(np.eye(3), [])) == [90.0, 90.0, 90.0]
+
+
+@pytest.mark.parametrize(("zoom", "roll_deg"), [(1.0, 0.0), (1.5, 10.0), (2.0, -15.0)])
+def test_a_zoomed_and_rolled_view_images_each_direction_where_its_truth_says(zoom, roll_deg):
+    # A bright dot where direction d images in the original camera must land, after the
+    # warp, at K' R d: the image and the rotated ground truth describe the same camera.
+    f, pp = 500.0, np.array([300.0, 250.0])
+    image = np.zeros((480, 640), np.uint8)
+    d = np.array([0.08, -0.05, 1.0])
+    dot = f * d[:2] / d[2] + pp
+    x, y = np.round(dot).astype(int)
+    image[y - 2:y + 3, x - 2:x + 3] = 255
+    dot = np.array([x, y], float)  # the dot's true centre, on the pixel grid
+    d = np.array([(dot[0] - pp[0]) / f, (dot[1] - pp[1]) / f, 1.0])
+    view, focal, r = zoom_roll(image, f, pp, zoom, roll_deg)
+    assert focal == pytest.approx(zoom * f)
+    ys, xs = np.nonzero(view > 0)
+    weights = view[ys, xs].astype(float)
+    found = np.array([xs @ weights, ys @ weights]) / weights.sum()
+    rd = r @ d
+    expected = focal * rd[:2] / rd[2] + np.array([(640 - 1) / 2.0, (480 - 1) / 2.0])
+    assert found == pytest.approx(expected, abs=0.3)
+
+
+@pytest.mark.skipif(not (YUD / "yud.json").is_file(),
+                    reason="the York Urban DB lives outside the repository (../shared/data)")
+def test_views_of_three_train_images_keep_their_manhattan_frame():
+    errors = evaluate_yud_variants(YUD, "train", limit=3)
+    assert list(errors) == ["as is", *VARIANTS]
+    for name, e in errors.items():
+        assert len(e) == 9, name
+        assert np.median(e) < 3.0, name
 
 
 @pytest.mark.skipif(not (YUD / "yud.json").is_file(),
