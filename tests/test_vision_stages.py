@@ -82,22 +82,31 @@ def test_with_a_known_focal_length_v2_must_be_nearly_orthogonal_to_v1():
     a1 = np.degrees(np.arctan2(v1[0] - C[0], F))
     off = np.array([C[0] + F * np.tan(np.radians(a1 - 90.0 + 14.0)), C[1]])
     distractor = _toward(off, rng.uniform([0, 0], [W, H], (30, 2)), 100)
+    without_v2 = np.vstack([segs[:25], segs[40:], distractor])  # rows 25-39 point at V2
     segs = np.vstack([segs, distractor])
     loose = VPParams(orthogonal_tol_deg=20.0)
     tight = VPParams(orthogonal_tol_deg=VPParams().known_focal_orthogonal_tol_deg)
 
-    def horizontal_layout(params):
-        layout = detect_layout_vps(segs, W, H, F, params)
+    def horizontal_layout(segments, params):
+        layout = detect_layout_vps(segments, W, H, F, params)
         return direction_of(layout.vps[[V1, V2]], F, C)
 
     def holds(dirs, target_px):
         target = direction_of(np.append(target_px, 1.0), F, C)
         return angle_between_directions_deg(dirs, target).min() < 1.0
 
-    assert holds(horizontal_layout(loose), off)  # 14° passes the guessed-focal tolerance
-    tight_layout = horizontal_layout(tight)
-    assert holds(tight_layout, v1) and holds(tight_layout, v2)
-    assert not holds(tight_layout, off)
+    # 14° passes the guessed-focal tolerance: with nothing better seen, V1 and the
+    # distractor are the pair; with the known focal length's they never are.
+    guessed = horizontal_layout(without_v2, loose)
+    assert holds(guessed, off) and holds(guessed, v1)
+    known = horizontal_layout(without_v2, tight)
+    assert not (holds(known, off) and holds(known, v1))
+    # ... but a right angle is worth more than support: the orthogonal pair wins even
+    # with the loose tolerance, where the pair's support is discounted by 1 − (14/20)².
+    for params in (loose, tight):
+        layout = horizontal_layout(segs, params)
+        assert holds(layout, v1) and holds(layout, v2)
+        assert not holds(layout, off)
 
 
 def test_layout_without_segments_is_not_found_and_finite():

@@ -588,21 +588,31 @@ cdef bint new_direction(const double* d, double (*seen)[3], int* nseen,
 
 cdef _choose_layout(list cands, double[:, ::1] pv, double* d3, Params* p):
     """Best-supported (near-)orthogonal pair of horizontal VPs; the rest are 'others'.
-    Returns (V1 (row, support), V2 (row, support), whether V2 was seen, others)."""
+    Returns (V1 (row, support), V2 (row, support), whether V2 was seen, others).
+
+    A pair's support is discounted for its departure ``dev`` from a right angle as MSAC
+    discounts a residual, by ``1 − (dev / orthogonal_tol_deg)²``: of two pairs with
+    about the same support (one axis seen as two nearby peaks) the more orthogonal wins,
+    and the discount reaches zero at the tolerance, where a pair is refused."""
     cdef Py_ssize_t i, j, a, b, top = 0
-    cdef double best_score = -1.0
+    cdef double best_score = -1.0, best_support = -1.0, dev, score
     best = None
     for i in range(len(cands)):
         for j in range(i + 1, len(cands)):
             a, b = cands[i][0], cands[j][0]
-            if abs(90.0 - angle_between_deg(&pv[a, 0], &pv[b, 0])) > p.orthogonal_tol_deg:
+            dev = abs(90.0 - angle_between_deg(&pv[a, 0], &pv[b, 0]))
+            if dev > p.orthogonal_tol_deg:
                 continue
-            if cands[i][1] + cands[j][1] > best_score:
-                best, best_score = (i, j), cands[i][1] + cands[j][1]
+            score = cands[i][1] + cands[j][1]
+            if p.orthogonal_tol_deg > 0:
+                score *= 1.0 - (dev / p.orthogonal_tol_deg) ** 2
+            if score > best_score:
+                best, best_score = (i, j), score
+                best_support = cands[i][1] + cands[j][1]
     for i in range(1, len(cands)):
         if cands[i][1] > cands[top][1]:
             top = i
-    if best is None or cands[top][1] > best_score:
+    if best is None or cands[top][1] > best_support:
         # Only one axis seen well: V2 is inferred ⟂ V1 on the horizon.
         return cands[top], None, False, [c for k, c in enumerate(cands) if k != top]
     i, j = best
