@@ -242,7 +242,7 @@ def run_eval(args) -> int:
 
 
 def _eval_yud_variants(args, cfg: Config, start: float) -> int:
-    from sitl.yud import area_under_curve, evaluate_yud_variants, format_variants
+    from sitl.yud import THRESHOLDS_DEG, area_under_curve, evaluate_yud_variants, format_variants
 
     errors = evaluate_yud_variants(args.yud, args.split, cfg)
     print(f"York Urban DB, {args.split} split, focal length given: layout VPs on the "
@@ -253,7 +253,7 @@ def _eval_yud_variants(args, cfg: Config, start: float) -> int:
           f"--split {args.split} --variants)")
     if args.json:
         with _open_output(args.json, "figures") as f:
-            json.dump({name: [round(area_under_curve(e, th), 2) for th in (3.0, 5.0, 10.0)]
+            json.dump({name: [round(area_under_curve(e, th), 2) for th in THRESHOLDS_DEG]
                        for name, e in errors.items()}, f, indent=2)
     return 0
 

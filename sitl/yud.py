@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from companion.config import Config
+from companion.vision.geometry import principal_point
 from companion.vision.pipeline import Pipeline
 from companion.vision.vanishing import NONE, assign_segments
 
@@ -263,7 +264,7 @@ VARIANTS: dict[str, tuple[float, float]] = {
 }
 
 
-def zoom_roll(image: np.ndarray, focal_px: float, principal_point: np.ndarray, zoom: float,
+def zoom_roll(image: np.ndarray, focal_px: float, principal_point_px: np.ndarray, zoom: float,
               roll_deg: float) -> tuple[np.ndarray, float, np.ndarray]:
     """The view of a camera rolled by ``roll_deg`` (clockwise in the image) about its
     optical axis, with its focal length ×``zoom``, as a same-size image centred on the
@@ -277,9 +278,9 @@ def zoom_roll(image: np.ndarray, focal_px: float, principal_point: np.ndarray, z
     h, w = image.shape[:2]
     a = np.radians(roll_deg)
     rot2 = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-    centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    centre = principal_point(w, h)
     # x' = zoom · rot2 (x - pp) + centre, the pinhole's image of R d for every pixel.
-    warp = np.c_[zoom * rot2, centre - zoom * rot2 @ np.asarray(principal_point, float)]
+    warp = np.c_[zoom * rot2, centre - zoom * rot2 @ np.asarray(principal_point_px, float)]
     out = cv2.warpAffine(image, warp, (w, h), flags=cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_REFLECT)
     r = np.eye(3)
@@ -294,26 +295,26 @@ def evaluate_yud_variants(folder: str | Path, split: str = "train",
     as they are (``"as is"``) and on each of :data:`VARIANTS`."""
     yud = _load(folder, split, limit)
     cfg = config or Config()
-    k = np.linalg.inv(yud.k_inv)
-    out: dict[str, np.ndarray] = {}
-    for name, (zoom, roll) in {"as is": (1.0, 0.0), **VARIANTS}.items():
-        errors = []
-        for im in yud.images:
-            image = yud.read(im)
-            h, w = image.shape[:2]
-            if name == "as is":
-                view, focal, r, centre = image, yud.f_true, np.eye(3), k[:2, 2]
+    pp = np.linalg.inv(yud.k_inv)[:2, 2]
+    views = {"as is": (1.0, 0.0), **VARIANTS}
+    pipelines = {name: Pipeline(replace(cfg, camera=replace(cfg.camera,
+                                                            focal_px=zoom * yud.f_true)))
+                 for name, (zoom, _) in views.items()}
+    errors: dict[str, list[float]] = {name: [] for name in views}
+    for im in yud.images:
+        image = yud.read(im)
+        truth = np.asarray(im["vps_dir"], dtype=float)
+        for name, (zoom, roll) in views.items():
+            if name == "as is":  # the true principal point, not the image centre
+                view, focal, r, centre = image, yud.f_true, np.eye(3), pp
             else:
-                view, focal, r = zoom_roll(image, yud.f_true, k[:2, 2], zoom, roll)
-                centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
-            pipeline = Pipeline(replace(cfg, camera=replace(cfg.camera, focal_px=focal)))
-            layout, _ = pipeline.layout(view)
+                view, focal, r = zoom_roll(image, yud.f_true, pp, zoom, roll)
+                centre = principal_point(image.shape[1], image.shape[0])
+            layout, _ = pipelines[name].layout(view)
             k_view = np.array([[focal, 0, centre[0]], [0, focal, centre[1]], [0, 0, 1.0]])
             dirs = [np.linalg.solve(k_view, v) for v in layout.vps[list(layout.usable_rows)]]
-            truth = (r @ np.asarray(im["vps_dir"], dtype=float).T).T
-            errors.extend(angular_errors_deg(truth, dirs))
-        out[name] = np.asarray(errors)
-    return out
+            errors[name].extend(angular_errors_deg((r @ truth.T).T, dirs))
+    return {name: np.asarray(e) for name, e in errors.items()}
 
 
 def format_variants(errors: dict[str, np.ndarray]) -> list[str]:
