@@ -404,6 +404,17 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     return dirs, observed, supports, other_dirs, other_support
 
 
+cdef inline bint inferred_v2(const double* v3, const double* v1, double* out) noexcept nogil:
+    """V2 when only V1 is seen: the unit direction ``v3 × v1``, at right angles to both,
+    facing forward (``z ≥ 0``). False (and zero) when V1 and V3 are the same direction."""
+    cross3(v3, v1, out)
+    if unit3(out) <= 0:
+        return False
+    if out[2] < 0:
+        out[0], out[1], out[2] = -out[0], -out[1], -out[2]
+    return True
+
+
 cdef void polish(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* p,
                  double[:, ::1] d, tuple observed, double[:, ::1] others):
     """Refit each observed layout VP (rows of ``d``: V1, V2, V3) on the segments that
@@ -417,25 +428,19 @@ cdef void polish(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* 
     cdef Py_ssize_t n = ns.shape[0], i, k, j
     cdef Py_ssize_t nv = 3 + others.shape[0]
     cdef double[:, ::1] v = np.empty((nv, 3))
+    cdef unsigned char[::1] usable = np.ones(nv, np.uint8)
     for k in range(3):
+        usable[k] = observed[k]
         for j in range(3):
             v[k, j] = d[k, j]
     for k in range(others.shape[0]):
         for j in range(3):
             v[3 + k, j] = others[k, j]
     cdef unsigned char[:, ::1] own = np.zeros((3, max(n, 1)), np.uint8)
-    cdef double best, sn
+    cdef double s2
     cdef Py_ssize_t label
     for i in range(n):
-        best, label = 2.0, -1
-        for k in range(nv):
-            if k < 3 and not observed[k]:
-                continue
-            if not is_inlier(&ns[i, 0], &v[k, 0], focal, p):
-                continue
-            sn = vp_sin(ns[i, 0], ns[i, 1], ns[i, 2], ns[i, 3], &v[k, 0])
-            if sn < best:
-                best, label = sn, k
+        label = nearest_vp(ns, i, v, &usable[0], p.sin_max, p.residual_px / focal, &s2)
         if 0 <= label < 3:
             own[label, i] = 1
     cdef double pt[3]
@@ -447,14 +452,9 @@ cdef void polish(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* 
         if dot3(&d[k, 0], &v[k, 0]) < 0:  # keep the sign conventions of the first fit
             for j in range(3):
                 d[k, j] = -d[k, j]
-    if observed[0] and not observed[1]:
-        cross3(&d[2, 0], &d[0, 0], pt)
-        if unit3(pt) > 0:
-            if pt[2] < 0:
-                for j in range(3):
-                    pt[j] = -pt[j]
-            for j in range(3):
-                d[1, j] = pt[j]
+    if observed[0] and not observed[1] and inferred_v2(&d[2, 0], &d[0, 0], pt):
+        for j in range(3):
+            d[1, j] = pt[j]
 
 
 cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengths,
@@ -554,11 +554,7 @@ cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1]
                 d[1, j] = pv[k, j]
             s2 = second[1]
         else:
-            cross3(d3, &pv[first[0], 0], pt)
-            unit3(pt)
-            if pt[2] < 0:
-                for j in range(3):
-                    pt[j] = -pt[j]
+            inferred_v2(d3, &pv[first[0], 0], pt)
             for j in range(3):
                 d[1, j] = pt[j]
     v3_length = v3_score = 0.0
@@ -620,6 +616,36 @@ cdef _choose_layout(list cands, double[:, ::1] pv, double* d3, Params* p):
     return cands[first], cands[second], True, [c for k, c in enumerate(cands) if k not in best]
 
 
+cdef inline Py_ssize_t nearest_vp(double[:, ::1] s, Py_ssize_t i, double[:, ::1] v,
+                                  const unsigned char* usable, double sin_max,
+                                  double residual, double* best_s2) noexcept nogil:
+    """The row of ``v`` (K×3 homogeneous points; only rows with ``usable[k]`` unless it is
+    NULL) that segment ``s[i]`` points at most closely, among those within both thresholds:
+    the angle between the segment and the direction from its midpoint to the point
+    (``sin ≤ sin_max``), and how far its ends stray from that line (``≤ residual``, in the
+    segment's units). −1 when none passes; ``best_s2`` is then 2, else the sin² of the
+    angle."""
+    cdef double ux = s[i, 2] - s[i, 0], uy = s[i, 3] - s[i, 1]
+    cdef double u2 = ux * ux + uy * uy
+    cdef double tx, ty, t2, cross, s2
+    cdef Py_ssize_t k, label = -1
+    best_s2[0] = 2.0
+    for k in range(v.shape[0]):
+        if usable != NULL and not usable[k]:
+            continue
+        tx = v[k, 0] - v[k, 2] * (0.5 * (s[i, 0] + s[i, 2]))
+        ty = v[k, 1] - v[k, 2] * (0.5 * (s[i, 1] + s[i, 3]))
+        t2 = tx * tx + ty * ty
+        cross = ux * ty - uy * tx
+        # sin² of the angle; the endpoint residual is |sin| · length / 2.
+        s2 = 1.0 if u2 * t2 <= 1e-24 else min(cross * cross / (u2 * t2), 1.0)
+        if s2 <= sin_max * sin_max and s2 * u2 <= 4.0 * residual * residual \
+                and s2 < best_s2[0]:
+            best_s2[0] = s2
+            label = k
+    return label
+
+
 def assign(segments, vps, double max_angle_deg, double residual_px):
     """Each segment's label: the index of the most consistent of the K homogeneous points
     ``vps`` (K×3) that passes both thresholds (the angle between the segment and the
@@ -628,28 +654,15 @@ def assign(segments, vps, double max_angle_deg, double residual_px):
     one coordinate frame (pixels)."""
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
     cdef double[:, ::1] v = np.ascontiguousarray(vps, dtype=float).reshape(-1, 3)
-    cdef Py_ssize_t n = s.shape[0], i, k
+    cdef Py_ssize_t n = s.shape[0], i
     labels_arr = np.full(n, -1, dtype=np.int64)
     angles_arr = np.empty(n)
     cdef long long[::1] labels = labels_arr
     cdef double[::1] angles = angles_arr
     cdef double sin_max = 1.0 if max_angle_deg >= 90.0 else sin(radians(max_angle_deg))
-    cdef double ux, uy, tx, ty, u2, t2, cross, s2, best_s2
+    cdef double best_s2
     for i in range(n):
-        ux, uy = s[i, 2] - s[i, 0], s[i, 3] - s[i, 1]
-        u2 = ux * ux + uy * uy
-        best_s2 = 2.0
-        for k in range(v.shape[0]):
-            tx = v[k, 0] - v[k, 2] * (0.5 * (s[i, 0] + s[i, 2]))
-            ty = v[k, 1] - v[k, 2] * (0.5 * (s[i, 1] + s[i, 3]))
-            t2 = tx * tx + ty * ty
-            cross = ux * ty - uy * tx
-            # sin² of the angle; the endpoint residual is |sin| · length / 2.
-            s2 = 1.0 if u2 * t2 <= 1e-24 else min(cross * cross / (u2 * t2), 1.0)
-            if s2 <= sin_max * sin_max and s2 * u2 <= 4.0 * residual_px * residual_px \
-                    and s2 < best_s2:
-                best_s2 = s2
-                labels[i] = k
+        labels[i] = nearest_vp(s, i, v, NULL, sin_max, residual_px, &best_s2)
         angles[i] = degrees(asin(sqrt(best_s2))) if labels[i] >= 0 else (
             vp_angle_deg(vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], &v[0, 0]))
             if v.shape[0] else 90.0)
