@@ -504,8 +504,7 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
         cross3(fr.d3, a.d1, d2)
         if unit3(d2) <= 0:
             continue
-        h = new_hypothesis(found)
-        a = &halves.items[i]
+        h = new_hypothesis(found)  # grows ``found``; ``a`` points into ``halves``
         set_ovps(h, a.d1, d2, horizon_error(fr, a.d1), a.edge)
         h.legs[0], h.legs[1] = a.legs[0], a.legs[1]
         h.nlegs = 2
