@@ -46,6 +46,7 @@ cdef struct Params:
     int vertical_alternatives
     double orthogonal_tol_deg
     double min_vp_separation_deg
+    double orthogonal_sigma_deg
 
 
 cdef Params _params(p):
@@ -63,6 +64,7 @@ cdef Params _params(p):
     q.vertical_alternatives = p.vertical_alternatives
     q.orthogonal_tol_deg = p.orthogonal_tol_deg
     q.min_vp_separation_deg = p.min_vp_separation_deg
+    q.orthogonal_sigma_deg = p.orthogonal_sigma_deg
     return q
 
 
@@ -103,13 +105,14 @@ cdef inline bint is_inlier(const double* s, const double* v, double focal,
     return cross * cross <= p.sin_max * p.sin_max * u2 * t2 and cross * cross * k2 <= t2
 
 
-cdef bint refine(double[:, ::1] ns, double[:, ::1] lines, const unsigned char* use,
-                 double focal, Params* p, double* vp) noexcept nogil:
-    """One least-squares step: the unit v minimising Σ w (l·v)² with w the MSAC score
-    times the endpoint weight of each usable segment. False (``vp`` untouched) when fewer
-    than two segments carry weight."""
-    cdef double a[9]
-    cdef double w
+cdef int scatter(double[:, ::1] ns, double[:, ::1] lines, const unsigned char* use,
+                 double focal, Params* p, const double* vp, double* a,
+                 double* msac_sum) noexcept nogil:
+    """The fit's scatter matrix ``a`` = Σ w l lᵀ (row-major 3×3), w the MSAC score times
+    the endpoint weight of each usable segment at ``vp``, so ``vᵀ a v`` is four times the
+    MSAC-weighted sum of squared endpoint residuals (normalised units). Adds the MSAC
+    scores to ``msac_sum``; returns how many segments carry weight."""
+    cdef double w, m
     cdef Py_ssize_t i
     cdef int k, count = 0
     for k in range(9):
@@ -117,16 +120,26 @@ cdef bint refine(double[:, ::1] ns, double[:, ::1] lines, const unsigned char* u
     for i in range(ns.shape[0]):
         if not use[i]:
             continue
-        w = msac_score(&ns[i, 0], vp, focal, p)
-        if w == 0.0:
+        m = msac_score(&ns[i, 0], vp, focal, p)
+        if m == 0.0:
             continue
-        w = w * endpoint_weight(&ns[i, 0], vp)
+        w = m * endpoint_weight(&ns[i, 0], vp)
         if w == 0.0:
             continue
         count += 1
+        msac_sum[0] += m
         for k in range(9):
             a[k] += w * lines[i, k // 3] * lines[i, k % 3]
-    if count < 2:
+    return count
+
+
+cdef bint refine(double[:, ::1] ns, double[:, ::1] lines, const unsigned char* use,
+                 double focal, Params* p, double* vp) noexcept nogil:
+    """One least-squares step: the unit v minimising Σ w (l·v)² over the :func:`scatter`
+    at ``vp``. False (``vp`` untouched) when fewer than two segments carry weight."""
+    cdef double a[9]
+    cdef double msac_sum = 0.0
+    if scatter(ns, lines, use, focal, p, vp, a, &msac_sum) < 2:
         return False
     smallest_eigenvector(a, vp)
     return True
@@ -424,7 +437,8 @@ cdef void polish(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* 
     on it, so a nearby family of parallel edges (a road beside a building, a rotated
     obstacle) pulls a layout VP towards itself. Here each segment is given to one VP, the
     one it points at most closely (as :func:`assign` labels segments), and each VP is
-    refined twice over its own. An inferred V2 is completed again ⟂ V1, V3."""
+    refined twice over its own, then under :func:`orthogonal_prior` when
+    ``orthogonal_sigma_deg`` is set. An inferred V2 is completed again ⟂ V1, V3."""
     cdef Py_ssize_t n = ns.shape[0], i, k, j
     cdef Py_ssize_t nv = 3 + others.shape[0]
     cdef double[:, ::1] v = np.empty((nv, 3))
@@ -449,12 +463,64 @@ cdef void polish(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* 
             continue
         for j in range(2):
             refine(ns, lines, &own[k, 0], focal, p, &d[k, 0])
-        if dot3(&d[k, 0], &v[k, 0]) < 0:  # keep the sign conventions of the first fit
+    if p.orthogonal_sigma_deg > 0:
+        orthogonal_prior(ns, lines, own, focal, p, d, observed, p.orthogonal_sigma_deg)
+    for k in range(3):
+        if observed[k] and dot3(&d[k, 0], &v[k, 0]) < 0:  # keep the first fit's signs
             for j in range(3):
                 d[k, j] = -d[k, j]
     if observed[0] and not observed[1] and inferred_v2(&d[2, 0], &d[0, 0], pt):
         for j in range(3):
             d[1, j] = pt[j]
+
+
+cdef void orthogonal_prior(double[:, ::1] ns, double[:, ::1] lines,
+                           unsigned char[:, ::1] own, double focal, Params* p,
+                           double[:, ::1] d, tuple observed, double sigma_deg):
+    """Refit the observed layout VPs (rows of ``d``, unit directions, in place) on their own
+    segments (``own``, 3×N) under a soft prior that they are orthogonal in space.
+
+    Each VP minimises its endpoint residuals over their variance plus
+    Σ_j (v·v_j)² / σ² over the other observed VPs: the MAP estimate when the room's three
+    directions are orthogonal to within ``sigma_deg`` (σ). A VP its segments pin down
+    stays where they put it; one they hardly constrain (a horizontal VP near infinity, a
+    few short segments) leans to the orthogonal frame. The residual variance is pooled over the three VPs.
+    Two sweeps of one VP at a time, each the smallest eigenvector of its scatter plus
+    λ Σ v_j v_jᵀ. Not a hard constraint (an exact rotation fit): real rooms, lenses and
+    principal points are not quite that orthogonal, and on YUD that fit did worse."""
+    cdef double a[3][9]
+    cdef double m[9]
+    cdef double cost, msac_sum, lam, sigma = radians(sigma_deg)
+    cdef int count[3]
+    cdef int k, j, q, sweep, nobs = 0
+    for k in range(3):
+        nobs += 1 if observed[k] else 0
+    if nobs < 2:
+        return
+    for sweep in range(2):
+        cost = 0.0
+        msac_sum = 0.0
+        for k in range(3):
+            count[k] = 0
+            if observed[k]:
+                count[k] = scatter(ns, lines, &own[k, 0], focal, p, &d[k, 0], a[k], &msac_sum)
+                for j in range(3):
+                    for q in range(3):
+                        cost += d[k, j] * a[k][3 * j + q] * d[k, q]
+        if msac_sum <= 0:
+            return
+        # vᵀ a v is 4 × Σ MSAC-weighted squared residuals: their variance is cost / (4 Σ m).
+        lam = cost / msac_sum / (sigma * sigma)
+        for k in range(3):
+            if count[k] < 2:
+                continue
+            for q in range(9):
+                m[q] = a[k][q]
+            for j in range(3):
+                if j != k and observed[j]:
+                    for q in range(9):
+                        m[q] += lam * d[j, q // 3] * d[j, q % 3]
+            smallest_eigenvector(m, &d[k, 0])
 
 
 cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1] lengths,

@@ -94,7 +94,9 @@ class Pipeline:
         self.config = config or Config()
         self._detectors: dict[float, object] = {}
         vp = self.config.vision.vanishing
-        self._known_focal_vp = replace(vp, orthogonal_tol_deg=vp.known_focal_orthogonal_tol_deg)
+        self._known_focal_vp = replace(
+            vp, orthogonal_tol_deg=vp.known_focal_orthogonal_tol_deg,
+            orthogonal_sigma_deg=vp.known_focal_orthogonal_sigma_deg)
 
     def detector_for(self, width: int, height: int):
         """The configured line detector for frames of ``width``×``height`` (built once per

@@ -23,7 +23,10 @@ that needs no calibration beyond a rough focal length and never divides by zero:
    family of edges a few degrees off a layout axis (a rotated obstacle, a road beside a
    building) pulls that VP. Each segment is now given to the one VP it points at best,
    layout or candidate (as :func:`assign_segments` labels them), and each observed
-   layout VP is refined on its own segments.
+   layout VP is refined on its own segments. With a known focal length the last refit
+   adds a soft prior that V1, V2, V3 are orthogonal within ``orthogonal_sigma_deg``
+   (MAP): a VP its segments hardly fix, such as a horizontal VP near infinity, leans to
+   the right angle with the others; one they fix stays put.
 
 All VPs are homogeneous pixel coordinates (unit-norm 3-vectors); see
 :mod:`companion.vision.geometry`.
@@ -81,6 +84,11 @@ class VPParams:
     """... and when it is given"""
     min_vp_separation_deg: float = field(default=3.0, metadata={"range": (0.0, 45.0)})
     """peaks closer than this are one VP"""
+    orthogonal_sigma_deg: float = field(default=0.0, metadata={"range": (0.0, 45.0)})
+    """the final refit's prior that the layout VPs are orthogonal, to within this (0: none,
+    as when the focal length is a guess)"""
+    known_focal_orthogonal_sigma_deg: float = field(default=1.0, metadata={"range": (0.0, 45.0)})
+    """... and when it is given"""
 
 
 @dataclass(frozen=True)
