@@ -244,9 +244,12 @@ def format_yud(reports: list[YudReport]) -> list[str]:
         pr = ("—" if f["assign_precision"] is None
               else f"{f['assign_precision']:.2f}/{f['assign_recall']:.2f}")
         focal = "given" if r.focal_given else "estimated" if r.method == "companion" else "default"
+        # From the errors, not from figures(): its values are already rounded, and
+        # rounding twice can move the last digit (83.4454 → 83.45 → 83.5).
+        aa = "".join(f"{area_under_curve(r.errors_deg, th):>8.1f}" for th in THRESHOLDS_DEG)
         lines.append(
-            f"{r.method:<14}{focal:<10}{f['images']:>7}{f['aa3']:>8.1f}"
-            f"{f['aa5']:>8.1f}{f['aa10']:>8.1f}{f['median_err_deg']:>8.2f}°"
+            f"{r.method:<14}{focal:<10}{f['images']:>7}{aa}"
+            f"{float(np.median(r.errors_deg)):>8.2f}°"
             f"{f['ms_per_image']:>8.1f}{pr:>13}  {est if not r.focal_given else '—'}")
     return lines
 

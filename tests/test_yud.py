@@ -7,10 +7,12 @@ import pytest
 
 from sitl.yud import (
     VARIANTS,
+    YudReport,
     angular_errors_deg,
     area_under_curve,
     evaluate_yud,
     evaluate_yud_variants,
+    format_yud,
     zoom_roll,
 )
 
@@ -38,6 +40,18 @@ def test_a_2_degree_error_gives_the_known_aa():
 def test_sign_free_and_nothing_estimated():
     assert angular_errors_deg(np.eye(3)[:1], -np.eye(3)[:1])[0] == pytest.approx(0.0)
     assert list(angular_errors_deg(np.eye(3), [])) == [90.0, 90.0, 90.0]
+
+
+def test_the_table_rounds_each_figure_once():
+    # One error of 0.496638°: AA@3° = 83.4454, which rounded to two places first would
+    # print as 83.5.
+    errors = np.array([3.0 * (1 - 0.834454)])
+    report = YudReport(split="train", images=1, focal_given=True, errors_deg=errors,
+                       ms_per_image=1.0, focal_estimates_px=np.empty(0), true_focal_px=674.9,
+                       assign_precision=None, assign_recall=None)
+    row = format_yud([report])[1].split()
+    assert row[3:6] == ["83.4", "90.1", "95.0"]
+    assert row[6] == "0.50°"
 
 
 @pytest.mark.parametrize(("zoom", "roll_deg"), [(1.0, 0.0), (1.5, 10.0), (2.0, -15.0)])
