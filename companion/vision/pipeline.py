@@ -36,6 +36,14 @@ STAGES = ("lines", "vps", "corners", "obstacles", "heading")
 SELF_CALIBRATION_TOL = 0.1
 """relative change of the estimated focal length when the VPs are found again with it"""
 
+SELF_CALIBRATION_GUESSES = (0.5, 0.3, 1.0, 1.5, 2.0)
+"""focal-length guesses, in frame widths, tried in turn until one leads to an estimate:
+horizontal fields of view of 90°, 118°, 53°, 37° and 28°. A guess far from the truth can
+pick the wrong V1–V2 pair, so a narrow or a wide lens needs a guess of its own."""
+
+FOCAL_RANGE = (0.2, 3.0)
+"""estimates outside these frame widths (fields of view of 136° and 19°) are discarded"""
+
 
 def _orthogonal_focal(layout: LayoutVPs, centre: np.ndarray) -> float | None:
     """The focal length that makes the observed V1 and V2 orthogonal, None without both."""
@@ -116,10 +124,11 @@ class Pipeline:
     def _layout(self, segments: np.ndarray, w: int, h: int) -> tuple[LayoutVPs, str]:
         """Layout VPs, and where the focal length they rest on came from.
 
-        ``given``: configured. Otherwise self-calibration: V1 and V2 found with the
-        assumed focal length (half the width, then the width) are orthogonal in space, so
-        when both are finite they fix ``f`` (:func:`focal_from_orthogonal_vps`); the VPs
-        are then found again with it (``estimated``). An estimate is taken at once when
+        ``given``: configured. Otherwise self-calibration: V1 and V2 found with an
+        assumed focal length (each of ``SELF_CALIBRATION_GUESSES`` in turn) are orthogonal
+        in space, so when both are finite they fix ``f``
+        (:func:`focal_from_orthogonal_vps`); the VPs are then found again with it
+        (``estimated``). An estimate is taken at once when
         the VPs found with it give it back (within ``SELF_CALIBRATION_TOL``), else only
         if no guess does better. Else ``assumed``. With a given focal length V1 ⟂ V2 is
         checked with the tighter ``known_focal_orthogonal_tol_deg``.
@@ -130,11 +139,11 @@ class Pipeline:
                                      self._known_focal_vp), "given"
         centre = principal_point(w, h)
         first = unconfirmed = None
-        for guess in (w / 2.0, float(w)):
+        for guess in (g * w for g in SELF_CALIBRATION_GUESSES):
             layout = detect_layout_vps(segments, w, h, guess, vp)
             first = first or layout
             f = _orthogonal_focal(layout, centre)
-            if f is None or not 0.3 * w <= f <= 3.0 * w:
+            if f is None or not FOCAL_RANGE[0] * w <= f <= FOCAL_RANGE[1] * w:
                 continue
             again = detect_layout_vps(segments, w, h, f, vp)
             f_again = _orthogonal_focal(again, centre)
