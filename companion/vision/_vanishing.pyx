@@ -484,10 +484,11 @@ cdef void orthogonal_prior(double[:, ::1] ns, double[:, ::1] lines,
     Σ_j (v·v_j)² / σ² over the other observed VPs: the MAP estimate when the room's three
     directions are orthogonal to within ``sigma_deg`` (σ). A VP its segments pin down
     stays where they put it; one they hardly constrain (a horizontal VP near infinity, a
-    few short segments) leans to the orthogonal frame. The residual variance is pooled over the three VPs.
-    Two sweeps of one VP at a time, each the smallest eigenvector of its scatter plus
-    λ Σ v_j v_jᵀ. Not a hard constraint (an exact rotation fit): real rooms, lenses and
-    principal points are not quite that orthogonal, and on YUD that fit did worse."""
+    few short segments) leans to the orthogonal frame. The residual variance is pooled
+    over the three VPs. Two sweeps of one VP at a time, each the smallest eigenvector of
+    its scatter plus λ Σ v_j v_jᵀ. Not a hard constraint (an exact rotation fit): real
+    rooms, lenses and principal points are not quite that orthogonal, and on YUD that fit
+    did worse."""
     cdef double a[3][9]
     cdef double m[9]
     cdef double cost, msac_sum, lam, sigma = radians(sigma_deg)

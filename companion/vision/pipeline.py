@@ -128,9 +128,9 @@ class Pipeline:
         assumed focal length (each of ``SELF_CALIBRATION_GUESSES`` in turn) are orthogonal
         in space, so when both are finite they fix ``f``
         (:func:`focal_from_orthogonal_vps`); the VPs are then found again with it
-        (``estimated``). An estimate is taken at once when
-        the VPs found with it give it back (within ``SELF_CALIBRATION_TOL``), else only
-        if no guess does better. Else ``assumed``. With a given focal length V1 ⟂ V2 is
+        (``estimated``). An estimate is taken at once when the VPs found with it give it
+        back (within ``SELF_CALIBRATION_TOL``), else only if no guess does better. Else
+        ``assumed``. With a given focal length V1 ⟂ V2 is
         checked with the tighter ``known_focal_orthogonal_tol_deg``.
         """
         vp = self.config.vision.vanishing
