@@ -74,6 +74,10 @@ class PolicyConfig:
     deadband_deg: float = field(default=3.0, metadata=_range(0.0, 45.0))
     turn_time_s: float = field(default=1.0, metadata=_range(0.05, 60.0))
     max_yaw_rate_deg_s: float = field(default=30.0, metadata=_range(1.0, 360.0))
+    resume_course: bool = True
+    resume_after_s: float = field(default=1.0, metadata=_range(0.0, 60.0))
+    resume_gain_per_s: float = field(default=1.0, metadata=_range(0.01, 10.0))
+    resume_max_rate_deg_s: float = field(default=10.0, metadata=_range(0.5, 90.0))
 
 
 @dataclass(frozen=True)
@@ -91,7 +95,10 @@ class OffboardConfig:
     confirm_timeout_s: float = field(default=3.0, metadata=_range(0.5, 30.0))
     retry_after_s: float = field(default=5.0, metadata=_range(0.5, 300.0))
     eta_report_hz: float = field(default=4.0, metadata=_range(0.0, 50.0))
+    forward_speed_m_s: float = field(default=0.5, metadata=_range(0.0, 5.0))
+    forward_accel_m_s2: float = field(default=0.5, metadata=_range(0.05, 10.0))
     sim_arm_and_takeoff: bool = False
+    sim_takeoff_altitude_m: float | None = field(default=None, metadata=_range(0.3, 50.0))
 
 
 @dataclass(frozen=True)

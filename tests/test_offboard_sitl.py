@@ -224,7 +224,7 @@ def test_vision_stall_zeroes_the_yaw_rate_at_once_then_holds(port):
     assert any(s.yaw_rate_deg_s == 0.0 and s.mode == "OFFBOARD" for s in sent)
     assert 2.0 - 0.1 <= t_hold - t_stall <= 2.0 + 0.5
     texts = [text for _, _, text in ap.statustexts]
-    assert any("vision stalled: yaw rate 0" in t for t in texts)
+    assert any("vision stalled: stop, yaw rate 0" in t for t in texts)
     assert any("vision stalled: Hold" in t for t in texts)
     assert run.controller.state.name == "disabled"
 

@@ -52,3 +52,14 @@ def test_a_reversal_needs_two_frames_in_a_row():
     assert actions == ["left", "left", "forward", "forward", "forward", "forward", "right",
                        "right", "forward"]
     assert cmd.yaw_rate_deg_s == 0.0
+
+
+def test_resume_course_turns_the_short_way_back_capped():
+    from companion.control.policy import resume_course_rate
+
+    p = PolicyConfig(deadband_deg=3.0, resume_gain_per_s=1.0, resume_max_rate_deg_s=10.0)
+    assert resume_course_rate(20.0, 0.0, p) == -10.0  # right of the course: turn left
+    assert resume_course_rate(-6.0, 0.0, p) == 6.0
+    assert resume_course_rate(175.0, -175.0, p) == 10.0  # across ±180°: 10° to the right
+    assert resume_course_rate(2.0, 0.0, p) == 0.0  # within the deadband
+    assert resume_course_rate(20.0, 0.0, PolicyConfig(resume_course=False)) == 0.0

@@ -76,7 +76,7 @@ def test_vision_stall_zero_first_then_hold():
     assert run(active_state(), IN_OFFBOARD, decision, 1.2).yaw_rate_deg_s == 20.0
     stalled = run(active_state(), IN_OFFBOARD, decision, 1.6)
     assert stalled.stream and stalled.yaw_rate_deg_s == 0.0 and stalled.request is None
-    assert "vision stalled: yaw rate 0" in stalled.events
+    assert "vision stalled: stop, yaw rate 0" in stalled.events
     held = run(stalled.state, IN_OFFBOARD, decision, 4.1)
     assert held.request == "stop" and held.state.name == "disabled"
 
@@ -113,3 +113,90 @@ def test_the_turn_ends_where_the_setpoint_drops_to_zero():
     assert yaw_rate_setpoint(huge, end + 1e-4, 100.0, POLICY) == 0.0
     assert turn_ends_at(Decision(0.0, TurnCommand("forward", 0.0, 0.0)), POLICY) is None
     assert turn_ends_at(None, POLICY) is None
+
+
+# ------------------------------------------------------------------ forward flight
+
+FLY = OffboardConfig(enabled=True, stale_after_s=0.5, hold_after_s=3.0, confirm_timeout_s=3.0,
+                     retry_after_s=5.0, forward_speed_m_s=1.0, forward_accel_m_s2=0.5)
+FORWARD = TurnCommand("forward", 0.0, 0.0)
+HOLD_CMD = TurnCommand("hold", 0.0, 0.0)
+
+
+def fly(state, decision, now, yaw_deg=0.0, config=FLY):
+    vehicle = VehicleStatus(True, armed=True, in_air=True, offboard=True, yaw_deg=yaw_deg)
+    return supervise(state, vehicle, decision, now, config, POLICY)
+
+
+def engaged(now=0.0, yaw_deg=0.0, config=FLY):
+    """The first active tick (from engaging), at ``now``."""
+    engaging = SupervisorState("engaging", True, vision_fresh=True, start_t_s=now,
+                               tick_t_s=now)
+    return fly(engaging, Decision(now, FORWARD), now, yaw_deg, config)
+
+
+def test_forward_speed_ramps_up_from_zero_at_the_configured_acceleration():
+    step = engaged()
+    assert step.forward_m_s == 0.0  # no jump on engaging
+    speeds = []
+    for k in range(1, 41):  # 20 Hz for 2 s
+        t = k * 0.05
+        step = fly(step.state, Decision(t, FORWARD), t)
+        speeds.append(step.forward_m_s)
+    assert speeds[19] == pytest.approx(0.5)  # 1 s at 0.5 m/s²
+    assert speeds[-1] == pytest.approx(1.0) and max(speeds) == 1.0
+    assert all(b >= a for a, b in zip(speeds, speeds[1:], strict=False))
+
+
+def test_forward_flight_goes_on_while_turning():
+    step = engaged()
+    for k in range(1, 60):
+        step = fly(step.state, Decision(k * 0.05, FORWARD), k * 0.05)
+    turning = fly(step.state, Decision(3.0, RIGHT), 3.0)
+    assert turning.yaw_rate_deg_s == 20.0 and turning.forward_m_s == 1.0
+
+
+@pytest.mark.parametrize("why", ["hold", "stale"])
+def test_forward_speed_drops_to_zero_at_once_on_hold_or_stalled_vision(why):
+    step = engaged()
+    for k in range(1, 60):
+        step = fly(step.state, Decision(k * 0.05, FORWARD), k * 0.05)
+    assert step.forward_m_s == 1.0
+    if why == "hold":
+        stopped = fly(step.state, Decision(3.0, HOLD_CMD), 3.0)
+    else:
+        stopped = fly(step.state, Decision(2.9, FORWARD), 2.9 + 0.51)
+    assert stopped.stream and stopped.forward_m_s == 0.0 and stopped.yaw_rate_deg_s == 0.0
+    # and the way back up is a ramp again, not a jump
+    t = 3.0 if why == "hold" else 2.9 + 0.51
+    again = fly(stopped.state, Decision(t + 0.2, FORWARD), t + 0.2)
+    assert again.forward_m_s == pytest.approx(0.5 * 0.2)
+
+
+def test_speed_zero_config_is_turn_in_place_as_before():
+    hover = OffboardConfig(enabled=True, forward_speed_m_s=0.0)
+    step = engaged(yaw_deg=40.0, config=hover)
+    for k in range(1, 100):  # 5 s of no obstacle, 40° off the course it engaged at ... 0
+        step = fly(step.state, Decision(k * 0.05, FORWARD), k * 0.05, yaw_deg=10.0,
+                   config=hover)
+        assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == 0.0
+
+
+def test_course_is_resumed_only_after_the_obstacle_is_out_of_view_for_a_while():
+    step = engaged(yaw_deg=0.0)  # the course is 0°
+    assert step.state.course_deg == 0.0
+    # An obstacle: Table II turns right; then η aligned (in the deadband) keeps the heading.
+    step = fly(step.state, Decision(0.1, RIGHT, eta_deg=20.0), 0.1, yaw_deg=0.0)
+    assert step.yaw_rate_deg_s == 20.0
+    step = fly(step.state, Decision(1.0, FORWARD, eta_deg=1.0), 1.0, yaw_deg=20.0)
+    assert step.yaw_rate_deg_s == 0.0
+    # Out of view: not at once ...
+    step = fly(step.state, Decision(1.5, FORWARD), 1.5, yaw_deg=20.0)
+    assert step.yaw_rate_deg_s == 0.0
+    # ... but resume_after_s later, back left toward 0°, at most resume_max_rate_deg_s.
+    step = fly(step.state, Decision(2.1, FORWARD), 2.1, yaw_deg=20.0)
+    assert step.yaw_rate_deg_s == -POLICY.resume_max_rate_deg_s
+    step = fly(step.state, Decision(3.0, FORWARD), 3.0, yaw_deg=4.0)
+    assert step.yaw_rate_deg_s == pytest.approx(-4.0 * POLICY.resume_gain_per_s)
+    step = fly(step.state, Decision(3.5, FORWARD), 3.5, yaw_deg=2.0)  # in the deadband
+    assert step.yaw_rate_deg_s == 0.0

@@ -1,11 +1,13 @@
-"""The MAVSDK session: connect, watch the vehicle, stream yaw-rate setpoints, clean up.
+"""The MAVSDK session: connect, watch the vehicle, stream velocity setpoints, clean up.
 
 The imperative shell around :mod:`companion.control.supervisor`. Each tick (at
 ``offboard.setpoint_rate_hz``, independent of the camera) it reads what MAVSDK's
 telemetry says about the vehicle, asks :func:`~companion.control.supervisor.supervise`
-what to do, and does it: start or stop offboard, stream the newest yaw rate as a body-frame
-velocity setpoint (SET_POSITION_TARGET_LOCAL_NED, frame BODY_NED, type_mask 1479), tell the
-ground station (STATUSTEXT on each state change, η as NAMED_VALUE_FLOAT).
+what to do, and does it: start or stop offboard, stream the forward speed and yaw rate as
+a body-frame velocity setpoint (SET_POSITION_TARGET_LOCAL_NED, frame BODY_NED, type_mask
+1479, vertical velocity 0), tell the ground station (STATUSTEXT on each state change, η as
+NAMED_VALUE_FLOAT). It also keeps the vehicle's newest pose (:class:`VehiclePose`, from
+LOCAL_POSITION_NED and ATTITUDE) for whoever needs it: the simulation renders from it.
 
 Safety, beyond the state machine:
 
@@ -25,6 +27,7 @@ import logging
 import signal
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from companion.config import Config
@@ -33,7 +36,7 @@ from companion.control.policy import TurnCommand
 
 log = logging.getLogger("companion.offboard")
 
-__all__ = ["AutopilotNotFound", "OffboardController", "run_until_signal"]
+__all__ = ["AutopilotNotFound", "OffboardController", "VehiclePose", "run_until_signal"]
 
 # MAVSDK as COMPANION_COMPUTER: the autopilot's system id, component 195 (PX4-NOTES.md).
 COMPANION_SYSTEM_ID = 1
@@ -52,17 +55,38 @@ class _Telemetry:
     armed: bool = False
     in_air: bool = False
     offboard: bool = False
+    in_air_known: bool = False  # in_air has been reported at least once
+
+
+@dataclass(frozen=True)
+class VehiclePose:
+    """The vehicle's pose as the autopilot reports it, in its local NED frame (origin where
+    its estimator started, not anywhere the companion knows). ``attitude_t_us``: the
+    ATTITUDE message's time since the autopilot booted; ``position_updates``: how many
+    LOCAL_POSITION_NED have arrived."""
+
+    north_m: float
+    east_m: float
+    down_m: float
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+    attitude_t_us: int
+    position_updates: int
 
 
 class OffboardController:
     """Streams the newest turn decision to PX4 over MAVSDK, within the supervisor's rules.
 
     ``submit()`` and ``enable()`` may be called from any thread (the vision thread);
-    ``run()`` is the asyncio task that owns the MAVSDK session.
+    ``run()`` is the asyncio task that owns the MAVSDK session. ``clock`` is the time
+    decisions and the supervisor run on (monotonic seconds; a simulation run in lock-step
+    with its autopilot passes the simulated vehicle time).
     """
 
-    def __init__(self, config: Config):
+    def __init__(self, config: Config, clock: Callable[[], float] = time.monotonic):
         self.config = config
+        self.clock = clock
         self._lock = threading.Lock()
         self._decision: sv.Decision | None = None
         self._enable_requested = False
@@ -72,12 +96,15 @@ class OffboardController:
         # Set by submit() so a new decision goes out at once, not at the next tick.
         self._loop: asyncio.AbstractEventLoop | None = None
         self._wake: asyncio.Event | None = None
+        self.pose: VehiclePose | None = None  # newest telemetry, once both kinds arrived
+        # The newest decision that went out in a setpoint: (its t_s, time.monotonic() then).
+        self.sent: tuple[float, float] | None = None
 
     # ------------------------------------------------------------------ any thread
     def submit(self, command: TurnCommand, eta_deg: float | None = None,
                t_s: float | None = None) -> None:
-        """Hand over the newest decision (``t_s``: when it was made, time.monotonic())."""
-        decision = sv.Decision(time.monotonic() if t_s is None else t_s, command, eta_deg)
+        """Hand over the newest decision (``t_s``: when its frame was taken, on ``clock``)."""
+        decision = sv.Decision(self.clock() if t_s is None else t_s, command, eta_deg)
         with self._lock:
             self._decision = decision
             loop, wake = self._loop, self._wake
@@ -198,20 +225,57 @@ class _Session:
         def on_mode(mode):
             self.seen.offboard = mode == FlightMode.OFFBOARD
 
+        position: list = [None, 0]  # newest PositionVelocityNed, how many so far
+        attitude: list = [None]
+
+        def publish_pose() -> None:
+            pv, att = position[0], attitude[0]
+            if pv is None or att is None:
+                return
+            p = pv.position
+            self.ctl.pose = VehiclePose(p.north_m, p.east_m, p.down_m, att.roll_deg,
+                                        att.pitch_deg, att.yaw_deg, att.timestamp_us, position[1])
+
+        def on_position(pv) -> None:
+            position[0], position[1] = pv, position[1] + 1
+            publish_pose()
+
+        def on_attitude(att) -> None:
+            attitude[0] = att
+            publish_pose()
+
         self.tasks = [
+            asyncio.ensure_future(follow(self.telemetry.subscribe_position_velocity_ned(),
+                                         on_position)),
+            asyncio.ensure_future(follow(self.telemetry.subscribe_attitude_euler(), on_attitude)),
             asyncio.ensure_future(follow(self.telemetry.subscribe_flight_mode(), on_mode)),
             asyncio.ensure_future(follow(self.telemetry.subscribe_armed(),
                                          lambda v: setattr(self.seen, "armed", bool(v)))),
-            asyncio.ensure_future(follow(self.telemetry.subscribe_in_air(),
-                                         lambda v: setattr(self.seen, "in_air", bool(v)))),
+            asyncio.ensure_future(follow(self.telemetry.subscribe_in_air(), self._on_in_air)),
         ]
 
+    def _on_in_air(self, value) -> None:
+        self.seen.in_air, self.seen.in_air_known = bool(value), True
+
     async def arm_and_take_off(self, stop: asyncio.Event) -> None:
-        """Simulation only (``offboard.sim_arm_and_takeoff``): arm, take off, wait in air."""
+        """Simulation only (``offboard.sim_arm_and_takeoff``): arm, take off, wait in air.
+
+        A vehicle already in the air (a previous simulated run left it hovering) is left
+        as it is."""
         from mavsdk.asyncio.plugins.action import ActionError
 
+        cfg = self.ctl.config
+        settle = time.monotonic() + 2.0  # the first EXTENDED_SYS_STATE arrives within ~1 s
+        while not stop.is_set() and not self.seen.in_air_known and time.monotonic() < settle:
+            await asyncio.sleep(0.05)
+        if self.seen.in_air:
+            self.ctl._event("simulation: already in the air")
+            return
         self.ctl._event("simulation: arming and taking off")
-        deadline = time.monotonic() + self.ctl.config.mavlink.connect_timeout_s + 10.0
+        if cfg.offboard.sim_takeoff_altitude_m is not None:
+            await self._call(self.action.set_takeoff_altitude(
+                cfg.offboard.sim_takeoff_altitude_m), timeout_s=2.0)
+        deadline = time.monotonic() + cfg.mavlink.connect_timeout_s + 20.0
         while not stop.is_set() and time.monotonic() < deadline:
             try:
                 await self.action.arm()
@@ -239,23 +303,27 @@ class _Session:
         next_tick = time.monotonic()
         while not stop.is_set():
             wake.clear()  # a decision submitted from here on wakes the next tick
-            now = time.monotonic()
-            self.last_tick_s = now
+            now = ctl.clock()
+            self.last_tick_s = time.monotonic()
             decision, enable = ctl._take()
             if enable:
                 ctl.state = sv.enable(ctl.state)
                 await self._announce("companion re-enabled")
+            pose = ctl.pose
             vehicle = sv.VehicleStatus(
                 connected=await self.system.is_connected(), armed=self.seen.armed,
-                in_air=self.seen.in_air, offboard=self.seen.offboard)
+                in_air=self.seen.in_air, offboard=self.seen.offboard,
+                yaw_deg=None if pose is None else pose.yaw_deg)
             ctl.connected = vehicle.connected
             step = sv.supervise(ctl.state, vehicle, decision, now, cfg.offboard, cfg.policy)
             ctl.state = step.state
             for text in step.events:
                 await self._announce(text)
             if step.stream:
-                await self._call(self.offboard.set_velocity_body(
-                    VelocityBodyYawspeed(0.0, 0.0, 0.0, step.yaw_rate_deg_s)))
+                await self._call(self.offboard.set_velocity_body(VelocityBodyYawspeed(
+                    step.forward_m_s, 0.0, 0.0, step.yaw_rate_deg_s)))
+                if ctl.state.name == "active" and decision is not None:
+                    ctl.sent = (decision.t_s, time.monotonic())
             self.streaming = step.stream
             if step.request == "start":
                 await self._command(_blocking(self.offboard).start, timeout_s=1.5)
@@ -270,15 +338,17 @@ class _Session:
                     "time_boot_ms": int(now * 1000) & 0xFFFFFFFF, "name": "eta_deg",
                     "value": round(float(decision.eta_deg), 3)})
             # Ticks at setpoint_rate_hz, plus one at once for every new decision.
-            if time.monotonic() >= next_tick:
+            wall = time.monotonic()
+            if wall >= next_tick:
                 next_tick += period_s
-                if next_tick < time.monotonic() - period_s:  # fell behind: don't burst
-                    next_tick = time.monotonic()
-            wake_at = next_tick
+                if next_tick < wall - period_s:  # fell behind: don't burst
+                    next_tick = wall
+            delay = next_tick - wall
             turn_end = sv.turn_ends_at(decision, cfg.policy)
-            if turn_end is not None and now < turn_end < wake_at:
-                wake_at = turn_end + 1e-4  # just past it, so the tick sees the turn done
-            delay = max(0.0, wake_at - time.monotonic())
+            if turn_end is not None and now < turn_end:
+                # just past it, so the tick sees the turn done
+                delay = min(delay, turn_end - ctl.clock() + 1e-4)
+            delay = max(0.0, delay)
             with contextlib.suppress(asyncio.TimeoutError):
                 await asyncio.wait_for(wake.wait(), timeout=delay)
 

@@ -15,6 +15,13 @@ right (body FRD / NED, as PX4 and MAVSDK use).
 Across frames, :func:`confirm_reversal` adds one more rule: a turn against the last turn
 made needs two frames in a row asking for it. Near convergence a single frame can read M
 on the wrong side of the centre; alone it must not swing the vehicle back.
+
+Beyond the paper, :func:`resume_course_rate`: Table II aligns the heading with the
+obstacle's face, up to 45° off the course the pilot set, and nothing in the paper ever
+turns back, so in flight the vehicle left the obstacle behind and went on into the side
+wall (docs/flight.md has the figures). Once no obstacle has been in view for
+``resume_after_s``, the vehicle steers back to its course (the heading it had when offboard
+engaged), proportionally and at most ``resume_max_rate_deg_s``.
 """
 
 from __future__ import annotations
@@ -25,7 +32,8 @@ from typing import Literal
 
 from companion.config import PolicyConfig
 
-__all__ = ["TurnCommand", "TurnHistory", "confirm_reversal", "decide_turn"]
+__all__ = ["TurnCommand", "TurnHistory", "confirm_reversal", "decide_turn",
+           "resume_course_rate"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
@@ -58,6 +66,17 @@ def decide_turn(
     rate = turn / policy.turn_time_s
     rate = math.copysign(min(abs(rate), policy.max_yaw_rate_deg_s), turn)
     return TurnCommand("right" if turn > 0 else "left", turn, rate)
+
+
+def resume_course_rate(heading_deg: float, course_deg: float, policy: PolicyConfig) -> float:
+    """Yaw rate (deg/s, right positive) back toward ``course_deg`` from ``heading_deg``:
+    ``resume_gain_per_s`` × the heading error (wrapped to ±180°), capped at
+    ``resume_max_rate_deg_s``; 0 when ``resume_course`` is off or within the deadband."""
+    error = (course_deg - heading_deg + 180.0) % 360.0 - 180.0
+    if not policy.resume_course or abs(error) <= policy.deadband_deg:
+        return 0.0
+    rate = policy.resume_gain_per_s * error
+    return math.copysign(min(abs(rate), policy.resume_max_rate_deg_s), rate)
 
 
 @dataclass(frozen=True)

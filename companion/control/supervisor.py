@@ -1,4 +1,4 @@
-"""When the companion may command the vehicle, and what yaw rate it sends: a pure state machine.
+"""When the companion may command the vehicle, and what it sends: a pure state machine.
 
 No MAVSDK, sockets or clocks here: :func:`supervise` takes the previous state, what the
 vehicle reports, the newest vision decision and the time, and returns the next state, the
@@ -14,6 +14,19 @@ States::
            link lost while engaged (needs enable() again: never a silent resume)
 
 ``link_lost`` is entered from any state while the autopilot is not connected.
+
+What ``active`` streams is a body-frame velocity setpoint: forward speed and yaw rate,
+vertical velocity 0 (PX4 holds the altitude; vision never commands it):
+
+- yaw rate: Table II's turn (:func:`yaw_rate_setpoint`);
+- flying forward, once no obstacle has been seen for ``policy.resume_after_s``, the yaw
+  rate back to the course, the heading offboard engaged with
+  (:func:`~companion.control.policy.resume_course_rate`);
+- forward speed (:func:`forward_speed_setpoint`): ``offboard.forward_speed_m_s`` while
+  the scene is understood, also during a turn; 0 at once on ``hold`` (scene not
+  understood) and when vision is older than ``stale_after_s``. Speed rises no faster
+  than ``forward_accel_m_s2`` (from 0 on engaging, and after every stop), and falls at
+  once: PX4's own acceleration limits shape the braking, the companion never delays it.
 """
 
 from __future__ import annotations
@@ -23,11 +36,11 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 from companion.config import OffboardConfig, PolicyConfig
-from companion.control.policy import TurnCommand
+from companion.control.policy import TurnCommand, resume_course_rate
 
 __all__ = [
-    "Decision", "Step", "SupervisorState", "VehicleStatus", "enable", "initial_state", "supervise",
-    "turn_ends_at", "yaw_rate_setpoint",
+    "Decision", "Step", "SupervisorState", "VehicleStatus", "enable", "forward_speed_setpoint",
+    "initial_state", "supervise", "turn_ends_at", "yaw_rate_setpoint",
 ]
 
 StateName = Literal["disabled", "waiting", "engaging", "active", "link_lost"]
@@ -44,6 +57,7 @@ class VehicleStatus:
     armed: bool = False
     in_air: bool = False
     offboard: bool = False  # the heartbeat's mode is OFFBOARD
+    yaw_deg: float | None = None  # heading (ATTITUDE), right positive; None if not known
 
 
 @dataclass(frozen=True)
@@ -62,18 +76,24 @@ class SupervisorState:
     vision_fresh: bool = False
     start_t_s: float | None = None  # when offboard was last requested
     engaged_before_loss: bool = False
+    forward_m_s: float = 0.0  # the forward speed last streamed (the ramp starts from it)
+    tick_t_s: float | None = None  # when it was streamed
+    course_deg: float | None = None  # the heading when offboard engaged: the pilot's course
+    obstacle_t_s: float | None = None  # when a decision last saw an obstacle
 
 
 @dataclass(frozen=True)
 class Step:
-    """One tick's answer: the next state, whether to stream a setpoint and which yaw rate,
-    an offboard start/stop to request, and the state-change messages for the pilot."""
+    """One tick's answer: the next state, whether to stream a setpoint and which (yaw rate,
+    forward speed), an offboard start/stop to request, and the state-change messages for
+    the pilot."""
 
     state: SupervisorState
     stream: bool
     yaw_rate_deg_s: float
     request: Request
     events: tuple[str, ...]
+    forward_m_s: float = 0.0
 
 
 def initial_state(config: OffboardConfig) -> SupervisorState:
@@ -111,6 +131,22 @@ def turn_ends_at(decision: Decision | None, policy: PolicyConfig) -> float | Non
     return decision.t_s + min(abs(decision.command.turn_deg), policy.max_turn_deg) / rate
 
 
+def forward_speed_setpoint(decision: Decision | None, now_s: float, prev_m_s: float,
+                           dt_s: float, config: OffboardConfig) -> float:
+    """Body-frame forward speed (m/s) to fly at ``now_s`` for the newest decision.
+
+    ``config.forward_speed_m_s`` while the decision is fresh and the scene understood (any
+    action but ``hold``), reached from ``prev_m_s`` (streamed ``dt_s`` ago) at no more
+    than ``forward_accel_m_s2``; 0 at once for ``hold``, no decision, or one older than
+    ``stale_after_s``.
+    """
+    if (decision is None or now_s - decision.t_s > config.stale_after_s
+            or decision.command.action == "hold"):
+        return 0.0
+    ramped = max(prev_m_s, 0.0) + config.forward_accel_m_s2 * max(dt_s, 0.0)
+    return min(config.forward_speed_m_s, ramped)
+
+
 def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision | None,
               now_s: float, config: OffboardConfig, policy: PolicyConfig) -> Step:
     """Advance the state machine by one tick (module docstring has the diagram)."""
@@ -119,14 +155,37 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
     fresh = age_s <= config.stale_after_s
     engaged = prev.name in ("engaging", "active")
     if fresh != prev.vision_fresh and (engaged or fresh):
-        events.append("vision recovered" if fresh else "vision stalled: yaw rate 0")
+        events.append("vision recovered" if fresh else "vision stalled: stop, yaw rate 0")
     state = replace(prev, vision_fresh=fresh)
 
     def step(name: StateName, stream=False, rate=0.0, request: Request = None, **kw) -> Step:
         if name != prev.name and name in ("waiting", "disabled") and prev.name == "link_lost":
             events.append("autopilot link restored" + (
                 ": offboard stays off until re-enabled" if name == "disabled" else ""))
-        return Step(replace(state, name=name, **kw), stream, rate, request, tuple(events))
+        return Step(replace(state, name=name, forward_m_s=0.0, tick_t_s=now_s, **kw), stream,
+                    rate, request, tuple(events))
+
+    def fly(name: StateName) -> Step:
+        """Stream Table II's yaw rate, or the way back to the course, and the forward
+        speed, ramping from the last tick's."""
+        engaged_now = prev.name != "active"
+        was = 0.0 if engaged_now else prev.forward_m_s
+        dt = 0.0 if prev.tick_t_s is None else now_s - prev.tick_t_s
+        forward = forward_speed_setpoint(decision, now_s, was, dt, config)
+        course = vehicle.yaw_deg if engaged_now else prev.course_deg
+        seen_t = None if engaged_now else prev.obstacle_t_s
+        if fresh and decision is not None and decision.eta_deg is not None:
+            seen_t = decision.t_s
+        rate = yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy)
+        # Hovering (forward speed 0) there is no course to resume: Table II alone.
+        if (fresh and config.forward_speed_m_s > 0.0 and decision.command.action == "forward"
+                and decision.eta_deg is None and course is not None
+                and vehicle.yaw_deg is not None
+                and (seen_t is None or now_s - seen_t >= policy.resume_after_s)):
+            rate = resume_course_rate(vehicle.yaw_deg, course, policy)
+        answer = step(name, stream=True, rate=rate)
+        return replace(answer, forward_m_s=forward, state=replace(
+            answer.state, forward_m_s=forward, course_deg=course, obstacle_t_s=seen_t))
 
     if not vehicle.connected:
         if prev.name == "link_lost":
@@ -148,14 +207,12 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         if age_s > config.hold_after_s:
             events.append("vision stalled: Hold, released until re-enabled")
             return step("disabled", request="stop", enabled=False)
-        return step("active", stream=True,
-                    rate=yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy))
+        return fly("active")
 
     if prev.name == "engaging":
         if vehicle.offboard:
             events.append("offboard engaged")
-            return step("active", stream=True,
-                        rate=yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy))
+            return fly("active")
         waited = now_s - (prev.start_t_s if prev.start_t_s is not None else now_s)
         if waited > config.confirm_timeout_s or not (vehicle.armed and vehicle.in_air):
             events.append("offboard not confirmed by the autopilot; will retry")
