@@ -17,10 +17,20 @@ What it enforces, as PX4 does:
   with PX4's default parameters).
 - Arming is refused for ``arm_ready_s`` after boot (estimator not yet healthy).
 
-SET_POSITION_TARGET_LOCAL_NED (body or local frame, velocity + yaw rate) drives a
-first-order vehicle model. Every setpoint received is recorded (time, frame, yaw rate), as
-are NAMED_VALUE_FLOAT and STATUSTEXT messages, so tests assert on what crossed the wire.
-Malformed, unknown or wrong-target messages are ignored with a log line.
+SET_POSITION_TARGET_LOCAL_NED (body or local frame, velocity + yaw rate) flies the
+vehicle with a PX4 multicopter's response (:mod:`sitl.multicopter`: dead times, lags,
+tilt with acceleration), and its pose goes out as LOCAL_POSITION_NED, ATTITUDE and
+GLOBAL_POSITION_INT. Every setpoint received is recorded (time, frame, velocity, yaw
+rate), as are NAMED_VALUE_FLOAT and STATUSTEXT messages, so tests assert on what crossed
+the wire. Malformed, unknown or wrong-target messages are ignored with a log line. It knows
+nothing of rooms or obstacles.
+
+Time: by default the vehicle moves in real time. With ``lockstep`` it moves only when
+:meth:`MockAutopilot.advance` is called (a simulation that takes longer than real time to
+draw a camera frame steps the vehicle by one frame period each time), and every rule above
+runs on that simulated clock, which is also the ``time_boot_ms`` of its telemetry and
+paces every stream (a heartbeat also goes out after a real second without one, so the link
+stays up while nobody advances the clock). Commands are answered at once, in real time.
 """
 
 from __future__ import annotations
@@ -36,6 +46,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from pymavlink.dialects.v20 import common as mavlink
+
+from sitl import multicopter
 
 log = logging.getLogger("sitl.autopilot")
 
@@ -102,11 +114,17 @@ class AutopilotParams:
     min_setpoint_rate_hz: float = 2.0  # offboard needs a stream faster than this
     arm_ready_s: float = 3.0  # arming is TEMPORARILY_REJECTED before this
     takeoff_alt_m: float = 2.5  # MIS_TAKEOFF_ALT
+    takeoff_overshoot_m: float = 0.0  # PX4 levelled off 0.6 m above a 1.2 m request
     climb_rate_m_s: float = 1.0
-    yaw_tau_s: float = 0.2  # first-order yaw-rate response time constant
-    velocity_tau_s: float = 0.3
+    response: multicopter.Response = multicopter.Response()
+    yaw_drift_deg_s: float = 0.0  # heading drift after takeoff (PX4: ~1°/s, settling ...
+    yaw_drift_tau_s: float = 4.0  # ... away over the first seconds)
+    offboard_climb_m_s: float = 0.0  # altitude creep in offboard (PX4: 0.2 m in 6 s) ...
+    offboard_climb_s: float = 6.0  # ... for this long after offboard is entered
+    boot_yaw_deg: float = 0.0  # heading at boot; the local frame's origin is where it boots
     boot_in_air: bool = False  # start armed, hovering at takeoff_alt_m in Hold
     sim_rate_hz: float = 100.0
+    lockstep: bool = False  # the vehicle moves only in advance() (module docstring)
 
 
 @dataclass(frozen=True)
@@ -114,6 +132,7 @@ class SetpointRecord:
     """One SET_POSITION_TARGET_LOCAL_NED as received."""
 
     t_s: float  # time.monotonic() at reception
+    sim_t_s: float  # the autopilot's own clock at reception (s since boot)
     frame: int
     type_mask: int
     vx_m_s: float
@@ -125,19 +144,16 @@ class SetpointRecord:
 
 @dataclass
 class VehicleState:
-    """The first-order vehicle model, NED frame, heading in degrees from north."""
+    """The vehicle: its motion (:class:`sitl.multicopter.Motion`, NED frame, heading in
+    degrees from north) and what the autopilot says of it."""
 
-    north_m: float = 0.0
-    east_m: float = 0.0
-    down_m: float = 0.0
-    vn_m_s: float = 0.0
-    ve_m_s: float = 0.0
-    vd_m_s: float = 0.0
-    yaw_deg: float = 0.0
-    yaw_rate_deg_s: float = 0.0
+    motion: multicopter.Motion
     armed: bool = False
     landed_state: int = mavlink.MAV_LANDED_STATE_ON_GROUND
     mode: Px4Mode = HOLD
+    drift_from_s: float | None = None  # when the heading drift began (takeoff complete)
+    offboard_from_s: float | None = None  # when OFFBOARD was last entered
+    hold_at: tuple[float, float, float] | None = None  # where Hold (AUTO.LOITER) began
 
     @property
     def in_air(self) -> bool:
@@ -151,6 +167,8 @@ class _Stream:
 
 
 # message id → default interval (s), like PX4's onboard link.
+_POSE_STREAMS = (mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mavlink.MAVLINK_MSG_ID_ATTITUDE,
+                 mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT)
 _DEFAULT_STREAMS = {
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
     mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
@@ -181,12 +199,14 @@ class MockAutopilot:
         self._streams = {mid: _Stream(iv) for mid, iv in _DEFAULT_STREAMS.items()}
         self._params = {"COM_OF_LOSS_T": self.params.com_of_loss_t_s,
                         "MIS_TAKEOFF_ALT": self.params.takeoff_alt_m}
-        self.vehicle = VehicleState()
+        self.vehicle = VehicleState(multicopter.Motion(yaw_deg=self.params.boot_yaw_deg))
         if self.params.boot_in_air:
             self.vehicle.armed = True
             self.vehicle.landed_state = mavlink.MAV_LANDED_STATE_IN_AIR
-            self.vehicle.down_m = -self.params.takeoff_alt_m
+            self.vehicle.motion.down_m = -self.params.takeoff_alt_m
         self._boot_t = time.monotonic()
+        self._sim_t = 0.0  # lockstep: the simulated time since boot
+        self._heartbeat_wall_s = 0.0
         self._last_setpoint: SetpointRecord | None = None
         self.setpoints: list[SetpointRecord] = []
         self.named_values: list[tuple[float, str, float]] = []
@@ -237,7 +257,31 @@ class MockAutopilot:
     @property
     def yaw_deg(self) -> float:
         with self._lock:
-            return self.vehicle.yaw_deg
+            return self.vehicle.motion.yaw_deg
+
+    @property
+    def sim_time_s(self) -> float:
+        """The autopilot's clock: seconds since boot, simulated in lockstep."""
+        with self._lock:
+            return self._now()
+
+    def _now(self) -> float:
+        return self._sim_t if self.params.lockstep else time.monotonic() - self._boot_t
+
+    def advance(self, dt_s: float) -> float:
+        """Lockstep only: move the vehicle ``dt_s`` of simulated time (at ``sim_rate_hz``),
+        then send its pose; returns the new simulated time."""
+        if not self.params.lockstep:
+            raise RuntimeError("advance() needs AutopilotParams(lockstep=True)")
+        with self._lock:
+            steps = max(1, round(dt_s * self.params.sim_rate_hz))
+            for _ in range(steps):
+                self._sim_t += dt_s / steps
+                self._step(dt_s / steps, self._sim_t)
+            self._send_streams(self._sim_t)
+            for mid in _POSE_STREAMS:  # the new pose, whatever the streams' rates
+                self._send(self._telemetry(mid))
+            return self._sim_t
 
     @contextlib.contextmanager
     def physics_paused(self):
@@ -281,8 +325,11 @@ class MockAutopilot:
             now = time.monotonic()
             if now - last >= dt_sim:
                 with self._lock:
-                    self._step(now - last, now)
-                    self._send_streams(now)
+                    if not self.params.lockstep:
+                        self._step(now - last, self._now())
+                        self._send_streams(self._now())
+                    elif now - self._heartbeat_wall_s > 1.0:  # keep the link alive
+                        self._send(self._telemetry(mavlink.MAVLINK_MSG_ID_HEARTBEAT))
                 last = now
 
     def _receive(self) -> None:
@@ -311,6 +358,8 @@ class MockAutopilot:
                     log.exception("error handling %s; ignored", msg.get_type())
 
     def _send(self, msg, addr: tuple[str, int] | None = None) -> None:
+        if msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            self._heartbeat_wall_s = time.monotonic()
         buf = msg.pack(self._tx)
         self._tx.seq = (self._tx.seq + 1) % 256
         targets = [addr] if addr else {self._target, *self._peers}
@@ -323,6 +372,9 @@ class MockAutopilot:
         if mode == self.vehicle.mode:
             return
         self.vehicle.mode = mode
+        self.vehicle.offboard_from_s = None
+        m = self.vehicle.motion
+        self.vehicle.hold_at = (m.north_m, m.east_m, m.down_m) if mode == HOLD else None
         self.mode_changes.append((time.monotonic(), mode.name, why))
         log.info("mode %s (%s)", mode.name, why)
         self.on_event(f"mode {mode.name} ({why})")
@@ -331,12 +383,22 @@ class MockAutopilot:
 
     def _offboard_stream_alive(self, now: float) -> bool:
         sp = self._last_setpoint
-        return sp is not None and now - sp.t_s <= 1.0 / self.params.min_setpoint_rate_hz
+        return sp is not None and now - sp.sim_t_s <= 1.0 / self.params.min_setpoint_rate_hz
+
+    def _setpoint_at(self, t: float) -> SetpointRecord | None:
+        """The newest setpoint received at or before ``t`` (simulated s): what the vehicle
+        answers now, after the response's dead time."""
+        for sp in reversed(self.setpoints):
+            if sp.sim_t_s <= t:
+                return sp
+        return None
 
     def _step(self, dt: float, now: float) -> None:
-        v, p = self.vehicle, self.params
+        """Advance the vehicle ``dt`` s to ``now`` (the autopilot's clock)."""
+        v, p, r = self.vehicle, self.params, self.params.response
+        m = v.motion
         sp = self._last_setpoint
-        if v.mode == OFFBOARD and sp is not None and now - sp.t_s > p.com_of_loss_t_s:
+        if v.mode == OFFBOARD and sp is not None and now - sp.sim_t_s > p.com_of_loss_t_s:
             self._set_mode(p.offboard_loss_mode, "offboard setpoints lost")
             self._statustext(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: offboard lost")
         if self._paused:
@@ -344,39 +406,44 @@ class MockAutopilot:
         cmd_v = (0.0, 0.0, 0.0)
         cmd_yaw_rate = 0.0
         if not v.armed or not v.in_air:
-            cmd_v = (0.0, 0.0, 0.0)
-        elif v.mode == OFFBOARD and self._last_setpoint is not None:
-            cmd_v, cmd_yaw_rate = self._setpoint_command(self._last_setpoint)
+            pass
+        elif v.mode == OFFBOARD:
+            cmd_v = self._setpoint_command(self._setpoint_at(now - r.velocity_dead_s))[0]
+            if v.offboard_from_s is None:
+                v.offboard_from_s = now
+            if now - v.offboard_from_s < p.offboard_climb_s:
+                cmd_v = (cmd_v[0], cmd_v[1], cmd_v[2] - p.offboard_climb_m_s)
+            cmd_yaw_rate = self._setpoint_command(self._setpoint_at(now - r.yaw_dead_s))[1]
         elif v.mode == TAKEOFF:
-            cmd_v = (0.0, 0.0, -p.climb_rate_m_s)
-            if -v.down_m >= p.takeoff_alt_m:
+            target = -(p.takeoff_alt_m + p.takeoff_overshoot_m)
+            cmd_v = (0.0, 0.0, max(-p.climb_rate_m_s, min(p.climb_rate_m_s, target - m.down_m)))
+            if m.down_m <= target + 0.1:
                 v.landed_state = mavlink.MAV_LANDED_STATE_IN_AIR
+                v.drift_from_s = now
                 self._set_mode(HOLD, "takeoff complete")
-        elif v.mode == LAND or (v.mode == RTL and math.hypot(v.north_m, v.east_m) < 0.5):
+        elif v.mode == HOLD and v.hold_at is not None:  # loiter: back to where Hold began
+            cmd_v = tuple(max(-1.0, min(1.0, h - x)) for h, x in zip(
+                v.hold_at, (m.north_m, m.east_m, m.down_m), strict=True))
+        elif v.mode == LAND or (v.mode == RTL and math.hypot(m.north_m, m.east_m) < 0.5):
             cmd_v = (0.0, 0.0, p.climb_rate_m_s)
             v.landed_state = mavlink.MAV_LANDED_STATE_LANDING
         elif v.mode == RTL:
-            d = math.hypot(v.north_m, v.east_m)
-            cmd_v = (-v.north_m / d, -v.east_m / d, 0.0)
-        a_v = min(1.0, dt / p.velocity_tau_s)
-        v.vn_m_s += (cmd_v[0] - v.vn_m_s) * a_v
-        v.ve_m_s += (cmd_v[1] - v.ve_m_s) * a_v
-        v.vd_m_s += (cmd_v[2] - v.vd_m_s) * a_v
-        v.yaw_rate_deg_s += (cmd_yaw_rate - v.yaw_rate_deg_s) * min(1.0, dt / p.yaw_tau_s)
-        v.yaw_deg = (v.yaw_deg + v.yaw_rate_deg_s * dt + 180.0) % 360.0 - 180.0
-        if v.armed and v.in_air:
-            v.north_m += v.vn_m_s * dt
-            v.east_m += v.ve_m_s * dt
-            v.down_m = min(0.0, v.down_m + v.vd_m_s * dt)
-            if v.down_m >= 0.0 and v.landed_state == mavlink.MAV_LANDED_STATE_LANDING:
-                v.landed_state = mavlink.MAV_LANDED_STATE_ON_GROUND
-                v.armed = False  # PX4 auto-disarms on touchdown
-                v.vn_m_s = v.ve_m_s = v.vd_m_s = v.yaw_rate_deg_s = 0.0
-                self._set_mode(HOLD, "landed")
+            d = math.hypot(m.north_m, m.east_m)
+            cmd_v = (-m.north_m / d, -m.east_m / d, 0.0)
+        if v.drift_from_s is not None and p.yaw_drift_deg_s:
+            cmd_yaw_rate += p.yaw_drift_deg_s * math.exp(
+                -(now - v.drift_from_s) / p.yaw_drift_tau_s) / r.yaw_gain
+        multicopter.step(m, cmd_v, cmd_yaw_rate, dt, r, move=v.armed and v.in_air)
+        if m.down_m >= 0.0 and v.landed_state == mavlink.MAV_LANDED_STATE_LANDING:
+            v.landed_state = mavlink.MAV_LANDED_STATE_ON_GROUND
+            v.armed = False  # PX4 auto-disarms on touchdown
+            multicopter.step(m, cmd_v, 0.0, dt, r, move=False)
+            self._set_mode(HOLD, "landed")
 
-    def _setpoint_command(self, sp: SetpointRecord) -> tuple[tuple[float, float, float], float]:
+    def _setpoint_command(self, sp: SetpointRecord | None
+                          ) -> tuple[tuple[float, float, float], float]:
         """Velocity (NED, m/s) and yaw rate (deg/s) a setpoint asks for; zero if unusable."""
-        if sp.frame not in _SUPPORTED_FRAMES:
+        if sp is None or sp.frame not in _SUPPORTED_FRAMES:
             return (0.0, 0.0, 0.0), 0.0
         vel = [0.0, 0.0, 0.0]
         for i, bit, value in ((0, _IGNORE_VX, sp.vx_m_s), (1, _IGNORE_VY, sp.vy_m_s),
@@ -384,17 +451,18 @@ class MockAutopilot:
             if not sp.type_mask & bit:
                 vel[i] = value
         if sp.frame in _BODY_FRAMES:
-            c, s = math.cos(math.radians(self.vehicle.yaw_deg)), math.sin(
-                math.radians(self.vehicle.yaw_deg))
+            yaw = math.radians(self.vehicle.motion.yaw_deg)
+            c, s = math.cos(yaw), math.sin(yaw)
             vel[0], vel[1] = c * vel[0] - s * vel[1], s * vel[0] + c * vel[1]
         yaw_rate = 0.0 if sp.type_mask & _IGNORE_YAW_RATE else sp.yaw_rate_deg_s
         return (vel[0], vel[1], vel[2]), yaw_rate
 
     # ------------------------------------------------------------------ telemetry
     def _time_boot_ms(self) -> int:
-        return int((time.monotonic() - self._boot_t) * 1000) & 0xFFFFFFFF
+        return int(self._now() * 1000) & 0xFFFFFFFF
 
     def _send_streams(self, now: float) -> None:
+        """Send the streams that are due at ``now`` (the autopilot's clock)."""
         for mid, stream in self._streams.items():
             if stream.interval_s > 0 and now >= stream.next_t:
                 stream.next_t = now + stream.interval_s
@@ -404,6 +472,8 @@ class MockAutopilot:
 
     def _telemetry(self, mid: int):
         v, t = self.vehicle, self._time_boot_ms()
+        m = v.motion
+        vn, ve, vd = m.velocity(self.params.response)
         if mid == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
             base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
             if v.armed:
@@ -420,20 +490,20 @@ class MockAutopilot:
             return self._tx.extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED,
                                                       v.landed_state)
         if mid == mavlink.MAVLINK_MSG_ID_ATTITUDE:
-            return self._tx.attitude_encode(t, 0.0, 0.0, math.radians(v.yaw_deg), 0.0, 0.0,
-                                            math.radians(v.yaw_rate_deg_s))
+            return self._tx.attitude_encode(
+                t, math.radians(m.roll_deg), math.radians(m.pitch_deg), math.radians(m.yaw_deg),
+                0.0, 0.0, math.radians(m.yaw_rate_deg_s))
         if mid == mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
-            return self._tx.local_position_ned_encode(t, v.north_m, v.east_m, v.down_m,
-                                                      v.vn_m_s, v.ve_m_s, v.vd_m_s)
+            return self._tx.local_position_ned_encode(t, m.north_m, m.east_m, m.down_m,
+                                                      vn, ve, vd)
         if mid == mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
-            lat = HOME_LAT_DEG + math.degrees(v.north_m / EARTH_RADIUS_M)
+            lat = HOME_LAT_DEG + math.degrees(m.north_m / EARTH_RADIUS_M)
             lon = HOME_LON_DEG + math.degrees(
-                v.east_m / (EARTH_RADIUS_M * math.cos(math.radians(HOME_LAT_DEG))))
-            hdg = int(round((v.yaw_deg % 360.0) * 100)) % 36000
+                m.east_m / (EARTH_RADIUS_M * math.cos(math.radians(HOME_LAT_DEG))))
+            hdg = int(round((m.yaw_deg % 360.0) * 100)) % 36000
             return self._tx.global_position_int_encode(
-                t, int(lat * 1e7), int(lon * 1e7), int((488.0 - v.down_m) * 1000),
-                int(-v.down_m * 1000), int(v.vn_m_s * 100), int(v.ve_m_s * 100),
-                int(v.vd_m_s * 100), hdg)
+                t, int(lat * 1e7), int(lon * 1e7), int((488.0 - m.down_m) * 1000),
+                int(-m.down_m * 1000), int(vn * 100), int(ve * 100), int(vd * 100), hdg)
         if mid == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
             return self._tx.home_position_encode(
                 int(HOME_LAT_DEG * 1e7), int(HOME_LON_DEG * 1e7), 488000, 0.0, 0.0, 0.0,
@@ -488,7 +558,8 @@ class MockAutopilot:
 
     def _on_setpoint(self, msg) -> None:
         sp = SetpointRecord(
-            t_s=time.monotonic(), frame=msg.coordinate_frame, type_mask=msg.type_mask,
+            t_s=time.monotonic(), sim_t_s=self._now(), frame=msg.coordinate_frame,
+            type_mask=msg.type_mask,
             vx_m_s=msg.vx, vy_m_s=msg.vy, vz_m_s=msg.vz,
             yaw_rate_deg_s=math.degrees(msg.yaw_rate), mode=self.vehicle.mode.name)
         if sp.frame not in _SUPPORTED_FRAMES:
@@ -503,13 +574,13 @@ class MockAutopilot:
         else:
             p = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                  msg.param7]
-        v, now = self.vehicle, time.monotonic()
+        v, now = self.vehicle, self._now()
         accepted, denied = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED
         if cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] >= 0.5:
                 if v.armed:
                     return accepted
-                if now - self._boot_t < self.params.arm_ready_s:
+                if now < self.params.arm_ready_s:
                     return mavlink.MAV_RESULT_TEMPORARILY_REJECTED
                 if v.mode == OFFBOARD and not self._offboard_stream_alive(now):
                     return mavlink.MAV_RESULT_TEMPORARILY_REJECTED
