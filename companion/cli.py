@@ -328,6 +328,14 @@ def main(argv: list[str] | None = None) -> int:
             from sitl.closed_loop import simulate
 
             try:
+                if args.scenario == "approach":
+                    from sitl.approach import simulate_approach
+
+                    progress = _Progress(True)
+                    try:
+                        return simulate_approach(args, progress.update)
+                    finally:
+                        progress.close()
                 return simulate(args)
             except ValueError as exc:
                 raise UserError(str(exc)) from None

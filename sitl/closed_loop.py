@@ -106,13 +106,15 @@ def loop_config(cam: Camera, depth_px: float, port: int, base: Config | None = N
     rescaled so the vehicle behaves as the shipped defaults do with D = f: the deadband is
     the same bearing (3° → 11.8° of η), and ``max_turn_deg`` (up to 90°) and ``turn_time_s``
     are k times larger, so the yaw rate per degree of bearing is about the shipped one.
-    Timeouts and rate limits are as shipped.
+    Timeouts and rate limits are as shipped. The vehicle hovers (forward speed 0), as in
+    the paper's Table IV.
     """
     cfg = base or Config()
     k = cam.focal_px / depth_px
     deadband = math.degrees(math.atan(k * math.tan(math.radians(cfg.policy.deadband_deg))))
     return sitl_link(replace(
         cfg,
+        offboard=replace(cfg.offboard, forward_speed_m_s=0.0),
         camera=replace(cfg.camera, focal_px=cam.focal_px),
         heading=replace(cfg.heading, depth_px=depth_px),
         policy=replace(cfg.policy, deadband_deg=deadband,
@@ -298,18 +300,44 @@ def write_plot(runs: Sequence[LoopRun], path: str | Path, width: int = 900,
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
     """The options of ``companion sim`` (also ``python -m sitl.closed_loop``)."""
+    ap.add_argument("--scenario", choices=("turn", "approach"), default="turn",
+                    help="turn: hover and turn until η converges (the paper's Table IV, "
+                         "default); approach: fly past a rotated obstacle, randomized runs")
     ap.add_argument("--eta0", type=float, nargs="+", default=list(STARTS_DEG),
-                    metavar="DEG", help="starting η values (default: ±30 ±60 ±75)")
-    ap.add_argument("--plot", default="out/closed_loop.png",
-                    help="PNG of η and yaw rate over time (default out/closed_loop.png)")
+                    metavar="DEG", help="turn: starting η values (default: ±30 ±60 ±75)")
+    ap.add_argument("--plot", metavar="PATH",
+                    help="PNG: turn, η and yaw rate over time (default "
+                         "out/closed_loop.png); approach, the runs' top-down trajectories")
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=480)
     ap.add_argument("--port", type=int, default=14561,
-                    help="UDP port on 127.0.0.1 for the MAVLink link (default 14561)")
+                    help="turn: UDP port on 127.0.0.1 for the MAVLink link (default 14561; "
+                         "approach picks a free port per run)")
+    ap.add_argument("--runs", type=int, default=20, help="approach: runs (default 20)")
+    ap.add_argument("--seed", type=int, default=0, help="approach: seed of the run set")
+    ap.add_argument("--policy", choices=("paper", "none", "oracle"), default="paper",
+                    help="approach: paper (the pipeline, default), none (fly straight), "
+                         "oracle (the turn rule fed the renderer's true η)")
+    ap.add_argument("--autopilot", metavar="URL",
+                    help="approach: fly an autopilot that is already running (e.g. PX4 SITL: "
+                         "udpin://127.0.0.1:14540) in real time instead of the mock")
+    ap.add_argument("--camera-hz", type=float, default=5.0,
+                    help="approach: camera frames per second of flight (default 5)")
+    ap.add_argument("--workers", type=int, default=2,
+                    help="approach: runs side by side against the mock (default 2)")
+    ap.add_argument("--no-focal", action="store_true",
+                    help="approach: do not give the pipeline the camera's focal length")
+    ap.add_argument("--json", metavar="PATH", help="approach: write the figures as JSON")
+    ap.add_argument("--config", metavar="PATH", dest="sim_config",
+                    help="approach: YAML config for the companion (policy, offboard ...)")
 
 
 def simulate(args: argparse.Namespace) -> int:
     """Fly every start, print its table, write the plot; 0 if every start converged."""
+    if args.scenario == "approach":
+        from sitl.approach import simulate_approach
+
+        return simulate_approach(args)
     runs = []
     for eta0 in args.eta0:
         if not -89.0 < eta0 < 89.0:
@@ -319,7 +347,7 @@ def simulate(args: argparse.Namespace) -> int:
         for line in format_table(run):
             print(line, flush=True)
         print()
-    plot = Path(args.plot)
+    plot = Path(args.plot or "out/closed_loop.png")
     plot.parent.mkdir(parents=True, exist_ok=True)
     write_plot(runs, plot)
     ok = all(r.converged for r in runs)

@@ -1,0 +1,131 @@
+"""``companion sim --scenario approach``: the drawn scenarios, the harness's geometry, and
+real flights (renderer → pipeline → MAVSDK → lock-step mock PX4 over UDP) of each policy."""
+
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+from helpers.processes import free_udp_port
+
+from companion.cli import main
+from sitl.approach import (
+    BODY_RADIUS_M,
+    FrameMap,
+    draw_approach,
+    first_contact,
+    fly_approach,
+    summarize,
+)
+from sitl.scene import Box, Room
+
+
+def _fold45(angle):
+    return (angle + 45.0) % 90.0 - 45.0
+
+
+@pytest.mark.parametrize("run", range(12))
+def test_every_drawn_obstacle_stands_rotated_in_the_flight_path(run):
+    drawn = draw_approach(7, run)
+    assert drawn == draw_approach(7, run)  # a run is its (seed, run): reproducible
+    ap = drawn.at_altitude(drawn.altitude_m + 0.3)  # as flown: taller than the flight
+    assert ap.boxes[0].height >= ap.altitude_m + 0.3 + 0.4
+    u, v = ap.course_axes()
+    d = np.array([ap.boxes[0].x - ap.start_x_m, ap.boxes[0].y - ap.start_y_m])
+    assert 3.0 <= d @ u <= 7.0 and abs(d @ v) <= 0.5
+    assert 12.0 <= abs(_fold45(ap.boxes[0].yaw_deg)) <= 45.0
+    # Flying straight at the course would hit it: the body disc meets the footprint.
+    hits = [first_contact(ap.room, ap.boxes, *(np.array([ap.start_x_m, ap.start_y_m]) + s * u),
+                          ap.altitude_m) for s in np.arange(0.0, 8.0, 0.05)]
+    assert "obstacle" in hits
+    # Nothing but the obstacle is in the way, and the room holds the pass line.
+    assert hits[:hits.index("obstacle")] == [None] * hits.index("obstacle")
+    end = np.array([ap.start_x_m, ap.start_y_m]) + (ap.pass_distance_m() + 1.0) * u
+    assert ap.room.x_min < end[0] < ap.room.x_max
+
+
+def test_first_contact_knows_walls_obstacle_furniture_and_overflight():
+    room = Room(x_min=0.0, x_max=10.0, y_min=-3.0, y_max=3.0)
+    obstacle = Box(5.0, 0.0, 30.0, 1.0, 0.6, 1.5)
+    chair = Box(2.0, 2.0, 0.0, 0.5, 0.5, 0.8)
+    boxes = (obstacle, chair)
+    assert first_contact(room, boxes, 1.0, 0.0, 1.0) is None
+    assert first_contact(room, boxes, 5.0 - 0.5 - BODY_RADIUS_M * 0.9, 0.0, 1.0) == "obstacle"
+    assert first_contact(room, boxes, 5.0, 0.0, 1.6) is None  # above it
+    assert first_contact(room, boxes, 2.0, 2.0, 0.5) == "furniture"
+    assert first_contact(room, boxes, 2.0, 2.0, 1.0) is None  # above the chair
+    assert first_contact(room, boxes, 0.2, -1.0, 1.0) == "wall"
+    assert first_contact(room, boxes, 4.0, 3.0 - BODY_RADIUS_M * 0.9, 1.0) == "wall"
+
+
+def test_the_autopilots_frame_is_mapped_onto_the_start_pose():
+    # PX4's local frame: the vehicle hovers at (3, -2), heading 100°; the run starts at
+    # (1.5, 0.4) in the room, course -3°.
+    m = FrameMap(3.0, -2.0, 100.0, 1.5, 0.4, -3.0)
+    assert m.to_room(3.0, -2.0, 100.0) == pytest.approx((1.5, 0.4, -3.0))
+    ahead = (3.0 + 2.0 * math.cos(math.radians(100.0)), -2.0 + 2.0 * math.sin(math.radians(100.0)))
+    x, y, heading = m.to_room(*ahead, 110.0)  # 2 m along its heading, then 10° right
+    assert x == pytest.approx(1.5 + 2.0 * math.cos(math.radians(-3.0)))
+    assert y == pytest.approx(0.4 + 2.0 * math.sin(math.radians(-3.0)))
+    assert heading == pytest.approx(7.0)
+
+
+def _fly(run, policy):
+    return fly_approach(draw_approach(0, run), policy, port=free_udp_port())
+
+
+def test_flying_straight_hits_the_obstacle():
+    results = [_fly(run, "none") for run in (0, 1, 2)]
+    for r in results:
+        assert r.outcome == "collision" and r.hit == "obstacle", r
+        assert r.max_turn_deg < 5.0  # straight, as the autopilot flew it (heading drift)
+        assert len(r.path) > 10 and r.path[-1][0] > r.path[0][0] + 2.0  # it flew forward
+
+
+def test_the_turn_rule_fed_the_true_eta_gets_past():
+    results = [_fly(run, "oracle") for run in (0, 1, 2)]
+    for r in results:
+        assert r.outcome == "passed", r
+        assert r.min_clearance_m > BODY_RADIUS_M and r.max_turn_deg > 8.0
+        assert r.setpoint_ms and r.decision_ms
+
+
+def test_the_pipeline_flies_past_and_the_figures_are_written(tmp_path):
+    out = tmp_path / "paper.json"
+    plot = tmp_path / "paper.png"
+    code = main(["sim", "--scenario", "approach", "--runs", "3", "--seed", "0",
+                 "--policy", "paper", "--json", str(out), "--plot", str(plot)])
+    assert code == 0
+    figures = json.loads(out.read_text())
+    for key in ("scenario", "policy", "runs", "passed", "collisions", "timeouts",
+                "collision_free_rate", "per_run"):
+        assert key in figures
+    assert figures["scenario"] == "approach" and figures["runs"] == 3
+    assert figures["passed"] >= 2, figures["per_run"]
+    assert figures["frame_to_setpoint_ms"]["median"] is not None
+    assert plot.stat().st_size > 5000
+
+
+def test_summary_counts_outcomes():
+    from sitl.approach import RunResult
+
+    ap = draw_approach(0, 0)
+    rs = [(ap, RunResult(0, "passed", None, 10.0, 50, 0.5, 20.0, 1.2, [3.0], [0.5])),
+          (ap, RunResult(1, "collision", "wall", 8.0, 40, 0.9, 40.0, 1.2, [4.0], [0.7])),
+          (ap, RunResult(2, "timeout", None, 40.0, 200, 0.9, 40.0, 1.2, [5.0], [0.6]))]
+    s = summarize(rs, "paper", 0)
+    assert (s["passed"], s["collisions"], s["timeouts"]) == (1, 1, 1)
+    assert s["collision_free_rate"] == pytest.approx(2 / 3, abs=1e-4)
+    assert s["pass_rate"] == pytest.approx(1 / 3, abs=1e-4)
+
+
+@pytest.mark.skipif(not os.environ.get("PX4_SITL_URL"),
+                    reason="set PX4_SITL_URL to a running PX4 SITL (e.g. udpin://127.0.0.1:14540)")
+def test_against_a_real_px4_sitl(tmp_path):
+    out = tmp_path / "px4.json"
+    code = main(["sim", "--scenario", "approach", "--runs", "2", "--seed", "0", "--policy",
+                 "oracle", "--autopilot", os.environ["PX4_SITL_URL"], "--json", str(out)])
+    figures = json.loads(out.read_text())
+    assert code == 0 and figures["errors"] == 0
+    assert figures["passed"] == 2, figures["per_run"]
