@@ -251,6 +251,8 @@ class RunResult:
     decision_ms: list[float] = field(default_factory=list)
     setpoint_ms: list[float] = field(default_factory=list)
     path: list[tuple[float, float]] = field(default_factory=list)
+    # per frame: (t_s, heading_deg in the room, η or None, action) as decided
+    decisions: list[tuple[float, float, float | None, str]] = field(default_factory=list)
     detail: str = ""
 
 
@@ -309,11 +311,15 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             return
         n = controller.pose.position_updates
         target_us = int(round(mock.advance(period_s) * 1e6)) - 1000
-        deadline = time.monotonic() + 5.0
-        while time.monotonic() < deadline:
+        t0 = time.monotonic()
+        resent = t0
+        while time.monotonic() < t0 + 5.0:
             pose = controller.pose
             if pose is not None and pose.position_updates > n and pose.attitude_t_us >= target_us:
                 return
+            if time.monotonic() > resent + 0.25:  # MAVSDK can drop a callback under load
+                mock.send_pose()
+                resent = time.monotonic()
             time.sleep(0.0005)
         raise TimeoutError("no telemetry from the autopilot after a lock-step")
 
@@ -382,6 +388,8 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             t_wall = time.monotonic()
             result.decision_ms.append((time.perf_counter() - t0) * 1e3)
             controller.submit(cmd, eta, t_s=t_frame)
+            result.decisions.append((round(result.time_s, 2), round(heading, 2),
+                                     None if eta is None else round(eta, 2), cmd.action))
             if controller.state.name == "active":
                 _wait_sent(controller, mock, t_frame, t_wall, result)
             elif mock is not None:
@@ -502,7 +510,7 @@ def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: 
             "obstacle_off_line_m": round(ap.obstacle_off_line_m, 2),
             "obstacle_rel_yaw_deg": round(ap.obstacle_rel_yaw_deg, 1),
             "speed_m_s": round(ap.speed_m_s, 2), "hfov_deg": round(ap.hfov_deg, 1),
-            "detail": r.detail, "path": r.path})
+            "detail": r.detail, "path": r.path, "decisions": r.decisions})
     return {
         "scenario": "approach", "policy": policy, "seed": seed, "runs": n,
         "passed": count["passed"], "collisions": count["collision"],

@@ -279,9 +279,15 @@ class MockAutopilot:
                 self._sim_t += dt_s / steps
                 self._step(dt_s / steps, self._sim_t)
             self._send_streams(self._sim_t)
-            for mid in _POSE_STREAMS:  # the new pose, whatever the streams' rates
-                self._send(self._telemetry(mid))
+            self.send_pose()  # the new pose, whatever the streams' rates
             return self._sim_t
+
+    def send_pose(self) -> None:
+        """Send LOCAL_POSITION_NED, ATTITUDE and GLOBAL_POSITION_INT now (lock-step: again,
+        for a receiver that dropped them)."""
+        with self._lock:
+            for mid in _POSE_STREAMS:
+                self._send(self._telemetry(mid))
 
     @contextlib.contextmanager
     def physics_paused(self):

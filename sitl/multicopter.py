@@ -6,7 +6,8 @@ Fitted to what a real PX4 (SIH quadrotor, ``../shared/PX4-NOTES.md``) did:
   steady 95 % of the command (18–19.5 °/s for 20 °/s);
 - horizontal velocity: ~0.3 s dead time, then a fast and a slow first-order part
   (0.57 m/s after 1 s, 0.76 after 2 s, 0.9 only after ~4 s for a 1 m/s step: PX4's
-  acceleration and jerk limits). The model gives 0.60 / 0.79 / 0.92;
+  acceleration and jerk limits). The model gives 0.60 / 0.79 / 0.92. Vertical velocity
+  follows the fast part alone (PX4 holds altitude tightly);
 - the body tilts with the acceleration (nose down to speed up, into a turn), as a
   multicopter must: pitch = −atan(a_forward / g), roll = atan(a_right / g), reached
   with a 0.1 s lag. A camera fixed to the body sees the room tilt with it.
@@ -79,6 +80,7 @@ def step(m: Motion, cmd_ned_m_s: tuple[float, float, float], cmd_yaw_rate_deg_s:
     for i in range(3):
         m.v_fast[i] += (cmd_ned_m_s[i] - m.v_fast[i]) * a_fast
         m.v_slow[i] += (cmd_ned_m_s[i] - m.v_slow[i]) * a_slow
+    m.v_slow[2] = m.v_fast[2]
     after = m.velocity(r)
     m.north_m += after[0] * dt
     m.east_m += after[1] * dt

@@ -54,12 +54,26 @@ def test_a_reversal_needs_two_frames_in_a_row():
     assert cmd.yaw_rate_deg_s == 0.0
 
 
-def test_resume_course_turns_the_short_way_back_capped():
-    from companion.control.policy import resume_course_rate
+def test_avoidance_heading_is_table_ii_plus_a_pass_off_angle():
+    from companion.control.policy import avoidance_heading
 
-    p = PolicyConfig(deadband_deg=3.0, resume_gain_per_s=1.0, resume_max_rate_deg_s=10.0)
-    assert resume_course_rate(20.0, 0.0, p) == -10.0  # right of the course: turn left
-    assert resume_course_rate(-6.0, 0.0, p) == 6.0
-    assert resume_course_rate(175.0, -175.0, p) == 10.0  # across ±180°: 10° to the right
-    assert resume_course_rate(2.0, 0.0, p) == 0.0  # within the deadband
-    assert resume_course_rate(20.0, 0.0, PolicyConfig(resume_course=False)) == 0.0
+    p = PolicyConfig(max_turn_deg=30.0, min_avoid_deg=25.0)
+    assert avoidance_heading(28.0, 0.0, 0.0, p) == pytest.approx(28.0)  # Table II: turn by η
+    assert avoidance_heading(40.0, 0.0, 0.0, p) == pytest.approx(30.0)  # capped per decision
+    assert avoidance_heading(12.0, 0.0, 0.0, p) == pytest.approx(25.0)  # lifted off the course
+    assert avoidance_heading(-14.0, 5.0, 0.0, p) == pytest.approx(-25.0)  # face 9° left
+    assert avoidance_heading(-30.0, 170.0, 170.0, p) == pytest.approx(140.0)
+    assert avoidance_heading(20.0, 170.0, 170.0, p) == pytest.approx(-165.0)  # across ±180°
+    paper = PolicyConfig(max_turn_deg=30.0, min_avoid_deg=0.0)
+    assert avoidance_heading(12.0, 3.0, 0.0, paper) == pytest.approx(15.0)
+
+
+def test_heading_rate_is_table_ii_rate_toward_the_target():
+    from companion.control.policy import heading_rate
+
+    p = PolicyConfig(deadband_deg=3.0, turn_time_s=1.0, max_yaw_rate_deg_s=30.0)
+    assert heading_rate(20.0, 0.0, p) == 20.0
+    assert heading_rate(-60.0, 0.0, p) == -30.0
+    assert heading_rate(-175.0, 175.0, p) == 10.0  # the short way, across ±180°
+    assert heading_rate(2.0, 0.0, p) == 0.0
+    assert heading_rate(0.0, 20.0, p, max_rate_deg_s=10.0) == -10.0

@@ -152,8 +152,10 @@ def test_forward_flight_goes_on_while_turning():
     step = engaged()
     for k in range(1, 60):
         step = fly(step.state, Decision(k * 0.05, FORWARD), k * 0.05)
-    turning = fly(step.state, Decision(3.0, RIGHT), 3.0)
-    assert turning.yaw_rate_deg_s == 20.0 and turning.forward_m_s == 1.0
+    # η 20° seen from heading 0: Table II's heading 20°, lifted to min_avoid_deg (25°).
+    turning = fly(step.state, Decision(3.0, RIGHT, eta_deg=20.0, heading_deg=0.0), 3.0)
+    assert turning.yaw_rate_deg_s == pytest.approx(25.0 / POLICY.turn_time_s)
+    assert turning.forward_m_s == 1.0
 
 
 @pytest.mark.parametrize("why", ["hold", "stale"])
@@ -182,21 +184,53 @@ def test_speed_zero_config_is_turn_in_place_as_before():
         assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == 0.0
 
 
-def test_course_is_resumed_only_after_the_obstacle_is_out_of_view_for_a_while():
+def see(state, t, eta, action, heading, target_heading=None):
+    """A tick at ``t`` with a decision that saw η from ``heading``; the vehicle now at
+    ``target_heading`` (default: ``heading``)."""
+    command = TurnCommand(action, 0.0, 0.0) if action in ("forward", "hold") else (
+        TurnCommand(action, eta, eta))
+    now_heading = heading if target_heading is None else target_heading
+    return fly(state, Decision(t, command, eta_deg=eta, heading_deg=heading), t, now_heading)
+
+
+def test_the_heading_is_held_in_closed_loop_and_the_course_resumed_after_the_obstacle():
     step = engaged(yaw_deg=0.0)  # the course is 0°
     assert step.state.course_deg == 0.0
-    # An obstacle: Table II turns right; then η aligned (in the deadband) keeps the heading.
-    step = fly(step.state, Decision(0.1, RIGHT, eta_deg=20.0), 0.1, yaw_deg=0.0)
-    assert step.yaw_rate_deg_s == 20.0
-    step = fly(step.state, Decision(1.0, FORWARD, eta_deg=1.0), 1.0, yaw_deg=20.0)
-    assert step.yaw_rate_deg_s == 0.0
+    # A face 40° right: Table II's target is 30° (max_turn_deg), flown as a heading.
+    step = see(step.state, 0.1, 40.0, "right", 0.0)
+    assert step.state.target_deg == 30.0 and step.yaw_rate_deg_s == 30.0
+    # Between frames the rate follows the reported heading, not the frame's η.
+    step = fly(step.state, Decision(0.1, RIGHT, 40.0, 0.0), 0.3, yaw_deg=20.0)
+    assert step.yaw_rate_deg_s == pytest.approx(10.0 / POLICY.turn_time_s)
+    # Aligned with the face (η in the deadband): hold that heading.
+    step = see(step.state, 1.0, 1.0, "forward", 40.0)
+    assert step.state.target_deg == pytest.approx(41.0) and step.yaw_rate_deg_s == 0.0
     # Out of view: not at once ...
-    step = fly(step.state, Decision(1.5, FORWARD), 1.5, yaw_deg=20.0)
+    step = fly(step.state, Decision(1.5, FORWARD, None, 41.0), 1.5, yaw_deg=41.0)
     assert step.yaw_rate_deg_s == 0.0
     # ... but resume_after_s later, back left toward 0°, at most resume_max_rate_deg_s.
-    step = fly(step.state, Decision(2.1, FORWARD), 2.1, yaw_deg=20.0)
+    step = fly(step.state, Decision(2.1, FORWARD, None, 41.0), 2.1, yaw_deg=41.0)
     assert step.yaw_rate_deg_s == -POLICY.resume_max_rate_deg_s
-    step = fly(step.state, Decision(3.0, FORWARD), 3.0, yaw_deg=4.0)
-    assert step.yaw_rate_deg_s == pytest.approx(-4.0 * POLICY.resume_gain_per_s)
-    step = fly(step.state, Decision(3.5, FORWARD), 3.5, yaw_deg=2.0)  # in the deadband
-    assert step.yaw_rate_deg_s == 0.0
+    step = fly(step.state, Decision(3.0, FORWARD, None, 5.0), 3.0, yaw_deg=5.0)
+    assert step.yaw_rate_deg_s == pytest.approx(-5.0 / POLICY.turn_time_s)
+    step = fly(step.state, Decision(3.5, FORWARD, None, 2.0), 3.5, yaw_deg=2.0)
+    assert step.yaw_rate_deg_s == 0.0  # in the deadband
+
+
+def test_a_face_close_to_the_course_is_passed_at_least_min_avoid_deg_off_it():
+    step = engaged(yaw_deg=10.0)  # course 10°
+    step = see(step.state, 0.1, -12.0, "left", 10.0)  # face at -2°: 12° left of the course
+    assert step.state.target_deg == pytest.approx(10.0 - POLICY.min_avoid_deg)
+    # Once there, η reads +13° (the face is right of the heading) but no turn back:
+    step = see(step.state, 1.5, 13.0, "right", -15.0)
+    assert step.state.target_deg == pytest.approx(-15.0) and step.yaw_rate_deg_s == 0.0
+
+
+def test_a_turn_held_back_by_the_reversal_rule_keeps_the_target_and_hold_stops_turning():
+    step = engaged(yaw_deg=0.0)
+    step = see(step.state, 0.1, 30.0, "right", 0.0)
+    target = step.state.target_deg
+    step = see(step.state, 0.3, -40.0, "forward", 10.0)  # a one-frame flip, held back
+    assert step.state.target_deg == target and step.yaw_rate_deg_s > 0.0
+    step = see(step.state, 0.5, 20.0, "hold", 15.0)
+    assert step.yaw_rate_deg_s == 0.0 and step.forward_m_s == 0.0

@@ -103,8 +103,11 @@ class OffboardController:
     # ------------------------------------------------------------------ any thread
     def submit(self, command: TurnCommand, eta_deg: float | None = None,
                t_s: float | None = None) -> None:
-        """Hand over the newest decision (``t_s``: when its frame was taken, on ``clock``)."""
-        decision = sv.Decision(self.clock() if t_s is None else t_s, command, eta_deg)
+        """Hand over the newest decision (``t_s``: when its frame was taken, on ``clock``).
+        It carries the heading the autopilot reports now, the frame's a few ms ago."""
+        pose = self.pose
+        decision = sv.Decision(self.clock() if t_s is None else t_s, command, eta_deg,
+                               None if pose is None else pose.yaw_deg)
         with self._lock:
             self._decision = decision
             loop, wake = self._loop, self._wake

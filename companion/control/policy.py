@@ -16,12 +16,19 @@ Across frames, :func:`confirm_reversal` adds one more rule: a turn against the l
 made needs two frames in a row asking for it. Near convergence a single frame can read M
 on the wrong side of the centre; alone it must not swing the vehicle back.
 
-Beyond the paper, :func:`resume_course_rate`: Table II aligns the heading with the
-obstacle's face, up to 45° off the course the pilot set, and nothing in the paper ever
-turns back, so in flight the vehicle left the obstacle behind and went on into the side
-wall (docs/flight.md has the figures). Once no obstacle has been in view for
-``resume_after_s``, the vehicle steers back to its course (the heading it had when offboard
-engaged), proportionally and at most ``resume_max_rate_deg_s``.
+In forward flight the same rule is flown as a heading (:func:`avoidance_heading`): the
+heading the frame was taken at plus η, its turn capped at ``max_turn_deg``, held in closed
+loop on the heading the autopilot reports (:func:`heading_rate`). Two additions beyond the
+paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
+
+- a pass-off angle: the heading is at least ``min_avoid_deg`` off the course, on the
+  face's side. A face only 12°–18° off the course gains too little room when the vehicle
+  aligns with it, and the vehicle clipped the obstacle;
+- the course resumed: Table II aligns the heading with the face, up to 45° off the course
+  the pilot set, and nothing in the paper ever turns back, so the vehicle left the
+  obstacle behind and flew on into the side wall. Once no obstacle has been in view for
+  ``resume_after_s``, the heading goes back to the course (the heading offboard engaged
+  with) at most ``resume_max_rate_deg_s``.
 """
 
 from __future__ import annotations
@@ -32,8 +39,8 @@ from typing import Literal
 
 from companion.config import PolicyConfig
 
-__all__ = ["TurnCommand", "TurnHistory", "confirm_reversal", "decide_turn",
-           "resume_course_rate"]
+__all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
+           "decide_turn", "heading_rate", "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
@@ -68,15 +75,38 @@ def decide_turn(
     return TurnCommand("right" if turn > 0 else "left", turn, rate)
 
 
-def resume_course_rate(heading_deg: float, course_deg: float, policy: PolicyConfig) -> float:
-    """Yaw rate (deg/s, right positive) back toward ``course_deg`` from ``heading_deg``:
-    ``resume_gain_per_s`` × the heading error (wrapped to ±180°), capped at
-    ``resume_max_rate_deg_s``; 0 when ``resume_course`` is off or within the deadband."""
-    error = (course_deg - heading_deg + 180.0) % 360.0 - 180.0
-    if not policy.resume_course or abs(error) <= policy.deadband_deg:
+def wrap_deg(angle_deg: float) -> float:
+    """An angle in degrees, wrapped to [-180, 180)."""
+    return (angle_deg + 180.0) % 360.0 - 180.0
+
+
+def avoidance_heading(eta_deg: float, heading_deg: float, course_deg: float,
+                      policy: PolicyConfig) -> float:
+    """The heading (deg, right positive) to fly for an obstacle face seen at bearing
+    ``eta_deg`` from a frame taken at ``heading_deg``, on a flight along ``course_deg``.
+
+    Table II (eq. 11) turns by η: toward ``heading + η``, at most ``max_turn_deg`` per
+    decision. Beyond the paper, the heading is held at least ``min_avoid_deg`` off the
+    course, on the side the face points to (module docstring).
+    """
+    face = wrap_deg(heading_deg + eta_deg - course_deg)  # the face's direction off course
+    offset = math.copysign(max(abs(face), policy.min_avoid_deg), face)
+    turn = wrap_deg(course_deg + offset - heading_deg)
+    turn = math.copysign(min(abs(turn), policy.max_turn_deg), turn)
+    return wrap_deg(heading_deg + turn)
+
+
+def heading_rate(target_deg: float, heading_deg: float, policy: PolicyConfig,
+                 max_rate_deg_s: float | None = None) -> float:
+    """Yaw rate (deg/s, right positive) from ``heading_deg`` toward ``target_deg``: the
+    error over ``turn_time_s`` (Table II's rate), capped at ``max_rate_deg_s`` (default
+    ``max_yaw_rate_deg_s``); 0 within the deadband."""
+    error = wrap_deg(target_deg - heading_deg)
+    if abs(error) <= policy.deadband_deg:
         return 0.0
-    rate = policy.resume_gain_per_s * error
-    return math.copysign(min(abs(rate), policy.resume_max_rate_deg_s), rate)
+    cap = policy.max_yaw_rate_deg_s if max_rate_deg_s is None else max_rate_deg_s
+    rate = error / policy.turn_time_s
+    return math.copysign(min(abs(rate), cap), rate)
 
 
 @dataclass(frozen=True)

@@ -18,10 +18,12 @@ States::
 What ``active`` streams is a body-frame velocity setpoint: forward speed and yaw rate,
 vertical velocity 0 (PX4 holds the altitude; vision never commands it):
 
-- yaw rate: Table II's turn (:func:`yaw_rate_setpoint`);
-- flying forward, once no obstacle has been seen for ``policy.resume_after_s``, the yaw
-  rate back to the course, the heading offboard engaged with
-  (:func:`~companion.control.policy.resume_course_rate`);
+- yaw rate, hovering (``forward_speed_m_s`` 0): Table II's turn per decision
+  (:func:`yaw_rate_setpoint`), as in the paper's Table IV;
+- yaw rate, flying forward: toward the heading Table II asks for, at least
+  ``policy.min_avoid_deg`` off the course (the heading offboard engaged with), and back to
+  the course once no obstacle has been seen for ``policy.resume_after_s``
+  (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``);
 - forward speed (:func:`forward_speed_setpoint`): ``offboard.forward_speed_m_s`` while
   the scene is understood, also during a turn; 0 at once on ``hold`` (scene not
   understood) and when vision is older than ``stale_after_s``. Speed rises no faster
@@ -36,7 +38,7 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 from companion.config import OffboardConfig, PolicyConfig
-from companion.control.policy import TurnCommand, resume_course_rate
+from companion.control.policy import TurnCommand, avoidance_heading, heading_rate
 
 __all__ = [
     "Decision", "Step", "SupervisorState", "VehicleStatus", "enable", "forward_speed_setpoint",
@@ -67,6 +69,7 @@ class Decision:
     t_s: float
     command: TurnCommand
     eta_deg: float | None = None
+    heading_deg: float | None = None  # the vehicle's heading when the frame was taken
 
 
 @dataclass(frozen=True)
@@ -80,6 +83,8 @@ class SupervisorState:
     tick_t_s: float | None = None  # when it was streamed
     course_deg: float | None = None  # the heading when offboard engaged: the pilot's course
     obstacle_t_s: float | None = None  # when a decision last saw an obstacle
+    target_deg: float | None = None  # the heading flown to pass it
+    target_from_t_s: float | None = None  # the decision that set it
 
 
 @dataclass(frozen=True)
@@ -166,26 +171,32 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
                     rate, request, tuple(events))
 
     def fly(name: StateName) -> Step:
-        """Stream Table II's yaw rate, or the way back to the course, and the forward
-        speed, ramping from the last tick's."""
+        """Stream the yaw rate (module docstring) and the forward speed, ramping from the
+        last tick's."""
         engaged_now = prev.name != "active"
         was = 0.0 if engaged_now else prev.forward_m_s
         dt = 0.0 if prev.tick_t_s is None else now_s - prev.tick_t_s
         forward = forward_speed_setpoint(decision, now_s, was, dt, config)
         course = vehicle.yaw_deg if engaged_now else prev.course_deg
-        seen_t = None if engaged_now else prev.obstacle_t_s
-        if fresh and decision is not None and decision.eta_deg is not None:
-            seen_t = decision.t_s
-        rate = yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy)
-        # Hovering (forward speed 0) there is no course to resume: Table II alone.
-        if (fresh and config.forward_speed_m_s > 0.0 and decision.command.action == "forward"
-                and decision.eta_deg is None and course is not None
-                and vehicle.yaw_deg is not None
-                and (seen_t is None or now_s - seen_t >= policy.resume_after_s)):
-            rate = resume_course_rate(vehicle.yaw_deg, course, policy)
+        keep = {} if engaged_now else {"obstacle_t_s": prev.obstacle_t_s,
+                                       "target_deg": prev.target_deg,
+                                       "target_from_t_s": prev.target_from_t_s}
+        if config.forward_speed_m_s > 0.0 and course is not None and vehicle.yaw_deg is not None:
+            keep = _pass_target(keep, decision, fresh, course, policy)
+            target, seen_t = keep.get("target_deg"), keep.get("obstacle_t_s")
+            rate = 0.0
+            if fresh and decision.command.action != "hold":
+                if policy.resume_course and (seen_t is None
+                                             or now_s - seen_t >= policy.resume_after_s):
+                    rate = heading_rate(course, vehicle.yaw_deg, policy,
+                                        policy.resume_max_rate_deg_s)
+                elif target is not None:
+                    rate = heading_rate(target, vehicle.yaw_deg, policy)
+        else:  # hovering: Table II per decision, as in the paper's Table IV
+            rate = yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy)
         answer = step(name, stream=True, rate=rate)
         return replace(answer, forward_m_s=forward, state=replace(
-            answer.state, forward_m_s=forward, course_deg=course, obstacle_t_s=seen_t))
+            answer.state, forward_m_s=forward, course_deg=course, **keep))
 
     if not vehicle.connected:
         if prev.name == "link_lost":
@@ -229,6 +240,26 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         return step("waiting")
 
     return step("waiting" if prev.enabled else "disabled")
+
+
+def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg: float,
+                 policy: PolicyConfig) -> dict:
+    """The heading target and when an obstacle was last seen, after a new decision.
+
+    A decision that turns (or sees the face aligned, within the deadband) sets the target
+    from its η and heading; one whose turn the reversal rule held back (``forward`` with
+    η outside the deadband) leaves the target as it was.
+    """
+    if not fresh or decision is None or decision.eta_deg is None:
+        return keep
+    keep = {**keep, "obstacle_t_s": decision.t_s}
+    if decision.heading_deg is None or decision.t_s == keep.get("target_from_t_s"):
+        return keep
+    action, eta = decision.command.action, decision.eta_deg
+    if action in ("left", "right") or (action == "forward" and abs(eta) <= policy.deadband_deg):
+        keep["target_deg"] = avoidance_heading(eta, decision.heading_deg, course_deg, policy)
+        keep["target_from_t_s"] = decision.t_s
+    return keep
 
 
 def enable(state: SupervisorState) -> SupervisorState:
