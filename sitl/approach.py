@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -300,11 +301,13 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     controller = OffboardController(cfg, clock=clock)
     period_s = 1.0 / camera_hz
     result = RunResult(ap.run, "error", None, 0.0, 0, math.inf, 0.0, math.nan)
+    next_frame = [time.monotonic()]
 
     def advance() -> None:
         """One camera period of vehicle time: lock-step the mock, else wait it out."""
         if mock is None:
-            time.sleep(period_s)
+            next_frame[0] = max(next_frame[0] + period_s, time.monotonic())
+            time.sleep(max(0.0, next_frame[0] - time.monotonic()))
             return
         if controller.pose is None:  # MAVSDK not listening yet: nothing to wait for
             mock.advance(period_s)
@@ -456,13 +459,23 @@ def _free_udp_port() -> int:
 
 
 def _one(job: tuple) -> tuple[Approach, RunResult]:
-    seed, run, policy, kw = job
+    """One run, with MAVSDK's own stderr lines silenced: under the renderer's load it warns
+    of callbacks it had to drop, which the lock-step asks for again (see ``advance``);
+    whatever goes wrong in a run is in its result's ``detail``."""
     import logging
 
+    seed, run, policy, kw = job
     logging.getLogger("mavsdk").setLevel(logging.ERROR)
     ap = draw_approach(seed, run)
     port = None if kw.get("autopilot_url") else _free_udp_port()
-    return ap, fly_approach(ap, policy, port=port, **kw)
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+        return ap, fly_approach(ap, policy, port=port, **kw)
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def run_approaches(runs: int, seed: int, policy: str, *, workers: int = 2,
@@ -478,7 +491,11 @@ def run_approaches(runs: int, seed: int, policy: str, *, workers: int = 2,
             if progress:
                 progress(len(out), runs, [r for _, r in out])
     else:
-        with multiprocessing.get_context("spawn").Pool(workers) as pool:
+        # One core each: BLAS or OpenCV threads of their own would only contend.
+        for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(name, "1")
+        with multiprocessing.get_context("spawn").Pool(workers, initializer=cv2.setNumThreads,
+                                                       initargs=(1,)) as pool:
             for item in pool.imap_unordered(_one, jobs):
                 out.append(item)
                 if progress:

@@ -107,3 +107,18 @@ def test_a_lower_edge_threshold_finds_a_faint_edge():
     assert len(default) == 0
     lengths = np.hypot(found[:, 2] - found[:, 0], found[:, 3] - found[:, 1])
     assert np.count_nonzero(lengths > 100) >= 4  # the rectangle's four sides
+
+
+def test_a_bare_wall_over_the_floor_is_understood_without_any_vertical_edge():
+    """No vertical segment in view, so no V3 is observed; the two horizontal VPs (floor
+    tiles, wall edges) still say where the room is: the policy must not stop for it."""
+    from sitl.scene import Room
+
+    room = Room(x_min=0.0, x_max=8.0, y_min=-10.0, y_max=10.0, height=2.8, tile_m=0.5)
+    cam = Camera(width=640, height=480, hfov_deg=60.0, x=3.0, y=0.3, height_m=1.2,
+                 yaw_deg=8.0, pitch_deg=-3.0)
+    image, _ = render(Scene(room=room, noise_sigma=2.0, seed=3), cam)
+    est = _pipeline(cam.focal_px)(image)
+    assert not est.layout.found  # nothing vertical to back V3
+    assert est.scene_understood and est.eta_deg is None
+    assert not _pipeline(cam.focal_px)(np.full_like(image, 128)).scene_understood

@@ -226,11 +226,16 @@ def test_a_face_close_to_the_course_is_passed_at_least_min_avoid_deg_off_it():
     assert step.state.target_deg == pytest.approx(-15.0) and step.yaw_rate_deg_s == 0.0
 
 
-def test_a_turn_held_back_by_the_reversal_rule_keeps_the_target_and_hold_stops_turning():
+def test_a_turn_held_back_by_the_reversal_rule_keeps_the_target_and_hold_only_stops():
     step = engaged(yaw_deg=0.0)
     step = see(step.state, 0.1, 30.0, "right", 0.0)
     target = step.state.target_deg
     step = see(step.state, 0.3, -40.0, "forward", 10.0)  # a one-frame flip, held back
     assert step.state.target_deg == target and step.yaw_rate_deg_s > 0.0
-    step = see(step.state, 0.5, 20.0, "hold", 15.0)
-    assert step.yaw_rate_deg_s == 0.0 and step.forward_m_s == 0.0
+    # Scene not understood: the vehicle stops, and keeps turning to the heading it has
+    # (from earlier frames and telemetry), so that its view can change.
+    step = fly(step.state, Decision(0.5, HOLD_CMD, None, 15.0), 0.5, yaw_deg=15.0)
+    assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == pytest.approx(15.0)
+    # and stale vision stops both
+    step = fly(step.state, Decision(0.5, FORWARD, None, 15.0), 1.2, yaw_deg=15.0)
+    assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == 0.0

@@ -23,7 +23,9 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
 - yaw rate, flying forward: toward the heading Table II asks for, at least
   ``policy.min_avoid_deg`` off the course (the heading offboard engaged with), and back to
   the course once no obstacle has been seen for ``policy.resume_after_s``
-  (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``);
+  (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``). A frame whose
+  scene is not understood (``hold``) stops the vehicle but not this turn, which rests on
+  earlier frames and the reported heading: stopped and still, the view would never change;
 - forward speed (:func:`forward_speed_setpoint`): ``offboard.forward_speed_m_s`` while
   the scene is understood, also during a turn; 0 at once on ``hold`` (scene not
   understood) and when vision is older than ``stale_after_s``. Speed rises no faster
@@ -185,7 +187,7 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
             keep = _pass_target(keep, decision, fresh, course, policy)
             target, seen_t = keep.get("target_deg"), keep.get("obstacle_t_s")
             rate = 0.0
-            if fresh and decision.command.action != "hold":
+            if fresh:  # also in hold: the heading comes from telemetry, not this frame
                 if policy.resume_course and (seen_t is None
                                              or now_s - seen_t >= policy.resume_after_s):
                     rate = heading_rate(course, vehicle.yaw_deg, policy,

@@ -91,8 +91,11 @@ class Estimate:
 
     @property
     def scene_understood(self) -> bool:
-        """Whether the layout (a vertical and a horizontal VP) was found."""
-        return self.layout.found
+        """Whether the room's layout was seen: a vertical and a horizontal VP (the layout
+        the obstacle stage needs), or both horizontal VPs, as in a view of a bare wall
+        and the floor that holds no vertical edge at all."""
+        observed = self.layout.observed
+        return self.layout.found or bool(observed[V1] and observed[V2])
 
 
 class Pipeline:
