@@ -97,6 +97,7 @@ class OffboardConfig:
     eta_report_hz: float = field(default=4.0, metadata=_range(0.0, 50.0))
     forward_speed_m_s: float = field(default=0.5, metadata=_range(0.0, 5.0))
     forward_accel_m_s2: float = field(default=0.5, metadata=_range(0.05, 10.0))
+    turn_slowdown: float = field(default=0.0, metadata=_range(0.0, 1.0))
     sim_arm_and_takeoff: bool = False
     sim_takeoff_altitude_m: float | None = field(default=None, metadata=_range(0.3, 50.0))
 

@@ -327,16 +327,19 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
         raise TimeoutError("no telemetry from the autopilot after a lock-step")
 
     def hover_pose():
-        """Wait until the vehicle hovers after takeoff; its pose then."""
+        """Wait until the vehicle hovers after takeoff (its altitude steady to 2 cm for a
+        second); its pose then."""
         deadline = time.monotonic() + 90.0
-        last = None
+        recent: list[float] = []
         while time.monotonic() < deadline:
             advance()
             pose = controller.pose
-            if (pose is not None and -pose.down_m > 0.5 and controller.state.name == "waiting"
-                    and last is not None and abs(pose.down_m - last.down_m) < 0.02 * period_s):
+            if pose is None or -pose.down_m < 0.5 or controller.state.name != "waiting":
+                recent.clear()
+                continue
+            recent = [*recent, pose.down_m][-max(2, round(1.0 / period_s) + 1):]
+            if len(recent) > round(1.0 / period_s) and max(recent) - min(recent) < 0.02:
                 return pose
-            last = pose
         raise TimeoutError("the vehicle did not take off and hover")
 
     def camera() -> None:
@@ -450,14 +453,6 @@ def _guarded(camera: Callable[[], None], result: RunResult) -> Callable[[], None
 # --------------------------------------------------------------------------- many runs
 
 
-def _free_udp_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _one(job: tuple) -> tuple[Approach, RunResult]:
     """One run, with MAVSDK's own stderr lines silenced: under the renderer's load it warns
     of callbacks it had to drop, which the lock-step asks for again (see ``advance``);
@@ -467,7 +462,9 @@ def _one(job: tuple) -> tuple[Approach, RunResult]:
     seed, run, policy, kw = job
     logging.getLogger("mavsdk").setLevel(logging.ERROR)
     ap = draw_approach(seed, run)
-    port = None if kw.get("autopilot_url") else _free_udp_port()
+    from sitl.autopilot import free_udp_port
+
+    port = None if kw.get("autopilot_url") else free_udp_port()
     saved = os.dup(2)
     try:
         with open(os.devnull, "w") as devnull:

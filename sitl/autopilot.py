@@ -278,8 +278,8 @@ class MockAutopilot:
             for _ in range(steps):
                 self._sim_t += dt_s / steps
                 self._step(dt_s / steps, self._sim_t)
-            self._send_streams(self._sim_t)
-            self.send_pose()  # the new pose, whatever the streams' rates
+            self._send_streams(self._sim_t, skip=_POSE_STREAMS)
+            self.send_pose()  # the new pose once, whatever the streams' rates
             return self._sim_t
 
     def send_pose(self) -> None:
@@ -467,9 +467,11 @@ class MockAutopilot:
     def _time_boot_ms(self) -> int:
         return int(self._now() * 1000) & 0xFFFFFFFF
 
-    def _send_streams(self, now: float) -> None:
+    def _send_streams(self, now: float, skip: tuple[int, ...] = ()) -> None:
         """Send the streams that are due at ``now`` (the autopilot's clock)."""
         for mid, stream in self._streams.items():
+            if mid in skip:
+                continue
             if stream.interval_s > 0 and now >= stream.next_t:
                 stream.next_t = now + stream.interval_s
                 msg = self._telemetry(mid)
@@ -680,6 +682,13 @@ class MockAutopilot:
                 name.encode(), self._params[name], mavlink.MAV_PARAM_TYPE_REAL32,
                 len(names), names.index(name)), addr)
 
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that nothing is bound to right now (for a mock's link)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -131,7 +131,7 @@ def _setpoint_latency(video: str, focal_px: float, repeat: int, config: Config,
     from sitl.closed_loop import fly_alongside, hovering_autopilot, sitl_link
 
     cfg = sitl_link(replace(config, camera=replace(config.camera, focal_px=focal_px)), port,
-                    stale_after_s=2.0)
+                    stale_after_s=2.0, forward_speed_m_s=0.0)  # hover: each frame's own rate
     pipeline = Pipeline(cfg)
     controller = OffboardController(cfg)
     samples: list[tuple[float, float]] = []  # (capture t, yaw rate)

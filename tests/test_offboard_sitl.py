@@ -31,7 +31,9 @@ def in_air_autopilot(port: int, **params) -> MockAutopilot:
 
 
 def fly_config(port: int, policy: PolicyConfig | None = None, **offboard) -> Config:
-    return sitl_link(Config(policy=policy or PolicyConfig()), port, **offboard)
+    """Hovering (forward speed 0: Table II per decision) unless ``offboard`` says otherwise."""
+    return sitl_link(Config(policy=policy or PolicyConfig()), port,
+                     **{"forward_speed_m_s": 0.0, **offboard})
 
 
 class Running:
@@ -336,3 +338,28 @@ def test_a_new_decision_goes_out_at_once_not_at_the_next_tick(port):
             delays.append(first.t_s - t0)
             time.sleep(0.13 * (k % 3))  # land at different phases of the tick
     assert max(delays) < 0.1, delays
+
+
+def test_forward_flight_streams_the_ramped_speed_and_stops_at_once_when_vision_stalls(port):
+    config = fly_config(port, forward_speed_m_s=0.8, forward_accel_m_s2=0.8, stale_after_s=0.5)
+    with in_air_autopilot(port) as ap, Running(config) as run:
+        camera = Camera(run.controller, FORWARD)
+        with camera:
+            wait_active(ap, run)
+            t_active = time.monotonic()
+            time.sleep(2.0)
+            north0 = ap.vehicle.motion.north_m
+            time.sleep(1.0)
+            moved = ap.vehicle.motion.north_m - north0  # boot heading 0: forward is north
+            t_stall = camera.stop()
+        time.sleep(1.0)
+        sent = ap.setpoints_since(t_active)
+    speeds = [(s.t_s, s.vx_m_s) for s in sent]
+    assert all(s.vz_m_s == 0.0 and s.type_mask == 1479 for s in sent)  # altitude is PX4's
+    ramp = [v for t, v in speeds if t < t_stall]
+    assert ramp[0] <= 0.8 * 0.1 + 0.05  # no jump at the start ...
+    assert max(ramp) == pytest.approx(0.8)  # ... up to the configured speed
+    assert all(b >= a - 1e-9 for a, b in zip(ramp, ramp[1:], strict=False))
+    assert 0.4 < moved < 0.9  # the vehicle flew forward, PX4's lag included
+    after = [(t - t_stall, v) for t, v in speeds if t > t_stall + 0.5 + 0.1]
+    assert after and all(v == 0.0 for _, v in after)  # stale vision: stopped

@@ -239,3 +239,20 @@ def test_a_turn_held_back_by_the_reversal_rule_keeps_the_target_and_hold_only_st
     # and stale vision stops both
     step = fly(step.state, Decision(0.5, FORWARD, None, 15.0), 1.2, yaw_deg=15.0)
     assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == 0.0
+
+
+def test_turn_slowdown_takes_the_share_of_the_turn_still_to_make():
+    from dataclasses import replace as dc_replace
+
+    slow = dc_replace(FLY, turn_slowdown=1.0)
+    step = engaged(config=slow)
+    for k in range(1, 60):
+        step = fly(step.state, Decision(k * 0.05, FORWARD), k * 0.05, config=slow)
+    assert step.forward_m_s == 1.0
+    # A 30° target (max_turn_deg) from heading 0: the whole turn to make, so stopped ...
+    step = fly(step.state, Decision(3.0, RIGHT, eta_deg=40.0, heading_deg=0.0), 3.0,
+               config=slow)
+    assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == 30.0
+    # ... and with 15° still to go, half the speed the ramp allows.
+    step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0), 3.5, yaw_deg=15.0, config=slow)
+    assert step.forward_m_s == pytest.approx(0.5 * 0.5 * 0.5)

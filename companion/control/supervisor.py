@@ -27,8 +27,10 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   scene is not understood (``hold``) stops the vehicle but not this turn, which rests on
   earlier frames and the reported heading: stopped and still, the view would never change;
 - forward speed (:func:`forward_speed_setpoint`): ``offboard.forward_speed_m_s`` while
-  the scene is understood, also during a turn; 0 at once on ``hold`` (scene not
-  understood) and when vision is older than ``stale_after_s``. Speed rises no faster
+  the scene is understood, also during a turn (less ``turn_slowdown`` × the share of
+  ``max_turn_deg`` still to turn, when that is set: 0 by default, docs/flight.md); 0 at
+  once on ``hold`` (scene not understood) and when vision is older than
+  ``stale_after_s``. Speed rises no faster
   than ``forward_accel_m_s2`` (from 0 on engaging, and after every stop), and falls at
   once: PX4's own acceleration limits shape the braking, the companion never delays it.
 """
@@ -40,7 +42,7 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 from companion.config import OffboardConfig, PolicyConfig
-from companion.control.policy import TurnCommand, avoidance_heading, heading_rate
+from companion.control.policy import TurnCommand, avoidance_heading, heading_rate, wrap_deg
 
 __all__ = [
     "Decision", "Step", "SupervisorState", "VehicleStatus", "enable", "forward_speed_setpoint",
@@ -194,6 +196,8 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
                                         policy.resume_max_rate_deg_s)
                 elif target is not None:
                     rate = heading_rate(target, vehicle.yaw_deg, policy)
+                    to_turn = abs(wrap_deg(target - vehicle.yaw_deg)) / policy.max_turn_deg
+                    forward *= 1.0 - config.turn_slowdown * min(1.0, to_turn)
         else:  # hovering: Table II per decision, as in the paper's Table IV
             rate = yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy)
         answer = step(name, stream=True, rate=rate)

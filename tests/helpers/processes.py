@@ -1,16 +1,10 @@
 """Shared by the SITL and service tests: free ports, and stopping a process with SIGTERM."""
 
 import signal
-import socket
 import subprocess
 import time
 
-
-def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that nothing is bound to right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from sitl.autopilot import free_udp_port  # noqa: F401  (the tests' import point)
 
 
 def stop_with_sigterm(proc: subprocess.Popen, timeout_s: float = 5.0) -> tuple[int, float]:
