@@ -44,9 +44,11 @@ at the altitude the vehicle actually reports.
 
 from __future__ import annotations
 
+import asyncio
 import math
 import multiprocessing
 import os
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -276,7 +278,6 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     ``autopilot_url``, against an autopilot that is already running (real time)."""
     from companion.control.offboard import OffboardController
     from companion.vision.pipeline import Pipeline
-    from sitl.closed_loop import fly_alongside
 
     if policy not in POLICIES:
         raise ValueError(f"--policy {policy}: must be one of {', '.join(POLICIES)}")
@@ -331,7 +332,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
         second); its pose then."""
         deadline = time.monotonic() + 90.0
         recent: list[float] = []
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not session_over.is_set():
             advance()
             pose = controller.pose
             if pose is None or -pose.down_m < 0.5 or controller.state.name != "waiting":
@@ -341,6 +342,8 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             if len(recent) > round(1.0 / period_s) and max(recent) - min(recent) < 0.02:
                 return pose
         raise TimeoutError("the vehicle did not take off and hover")
+
+    session_over = threading.Event()  # the MAVSDK session ended (no autopilot, or an error)
 
     def camera() -> None:
         pose = hover_pose()
@@ -357,7 +360,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
         t_start = controller.clock()
         result.altitude_m = alt
         prev_xy = None
-        while True:
+        while not session_over.is_set():
             pose = controller.pose
             x, y, heading = frame_map.to_room(pose.north_m, pose.east_m, pose.yaw_deg)
             alt = -pose.down_m
@@ -407,11 +410,23 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     try:
         if mock is not None:
             mock.start()
-        fly_alongside(controller, _guarded(camera, result))
+        asyncio.run(_fly(controller, _guarded(camera, result), session_over))
     finally:
         if mock is not None:
             mock.stop()
     return result
+
+
+async def _fly(controller, camera: Callable[[], None], session_over: threading.Event) -> None:
+    """The controller's MAVSDK session and ``camera`` (in a thread) side by side, until
+    the camera is done; a session that ends first (no autopilot) stops the camera. Raises
+    what the session raised."""
+    stop = asyncio.Event()
+    session = asyncio.ensure_future(controller.run(stop))
+    session.add_done_callback(lambda _: session_over.set())
+    await asyncio.to_thread(camera)
+    stop.set()
+    await session
 
 
 def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None
@@ -643,10 +658,15 @@ def simulate_approach(args, progress=None) -> int:
             hits = sum(r.outcome == "collision" for r in so_far)
             progress(done, total, f"runs, {hits} collisions")
 
-    results = run_approaches(
-        args.runs, args.seed, args.policy, workers=max(1, args.workers), progress=report,
-        autopilot_url=args.autopilot, camera_hz=args.camera_hz, width=args.width,
-        height=args.height, base=base, focal_given=not args.no_focal)
+    from companion.control.offboard import AutopilotNotFound
+
+    try:
+        results = run_approaches(
+            args.runs, args.seed, args.policy, workers=max(1, args.workers), progress=report,
+            autopilot_url=args.autopilot, camera_hz=args.camera_hz, width=args.width,
+            height=args.height, base=base, focal_given=not args.no_focal)
+    except AutopilotNotFound as exc:
+        raise ValueError(str(exc)) from None
     if progress is not None:
         progress(args.runs, args.runs, "")
     summary = summarize(results, args.policy, args.seed)
