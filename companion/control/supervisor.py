@@ -30,9 +30,10 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   the scene is understood, also during a turn (less ``turn_slowdown`` × the share of
   ``max_turn_deg`` still to turn, when that is set: 0 by default, docs/flight.md); 0 at
   once on ``hold`` (scene not understood) and when vision is older than
-  ``stale_after_s``. Speed rises no faster
-  than ``forward_accel_m_s2`` (from 0 on engaging, and after every stop), and falls at
-  once: PX4's own acceleration limits shape the braking, the companion never delays it.
+  ``stale_after_s``. Speed rises no faster than ``forward_accel_m_s2`` (from 0 on
+  engaging, and after every stop), and falls at once: PX4's own acceleration limits
+  shape the braking, the companion never delays it. Until the autopilot has reported a
+  heading, the yaw rate is the hovering one.
 """
 
 from __future__ import annotations
