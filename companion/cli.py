@@ -30,6 +30,15 @@ class UserError(Exception):
     """Something the user can fix; printed as one line."""
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("companion")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed)"
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="companion",
@@ -42,6 +51,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--annotate", metavar="OUT.mp4", help="write an annotated video")
     ap.add_argument("--focal-px", type=float, metavar="F", help="known focal length in pixels")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ap.add_argument("--version", action="version", version=f"companion {_version()}")
     sub = ap.add_subparsers(dest="command", metavar="{run,eval,sim,bench}")
     rn = sub.add_parser("run", help="the service: camera → pipeline → PX4 offboard")
     rn.add_argument("--config", metavar="PATH", dest="run_config",

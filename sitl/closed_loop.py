@@ -136,7 +136,7 @@ def hovering_autopilot(port: int, **params):
     ``params`` replace further :class:`sitl.autopilot.AutopilotParams`.
 
     Imported here, not at the top: `companion --help` and the dry-run build the `sim`
-    parser from this module and must not need the mavlink extra.
+    parser from this module, and need not load MAVLink to do so.
     """
     from sitl.autopilot import AutopilotParams, MockAutopilot
 

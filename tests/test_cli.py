@@ -241,3 +241,11 @@ def test_dry_run_needs_no_mavlink_packages(sample_video):
                        timeout=120, cwd=ROOT)
     assert r.returncode == 0, r.stderr
     assert "frames:" in r.stdout
+
+
+def test_version_is_the_installed_package_version():
+    from importlib.metadata import version
+
+    proc = run("--version")
+    assert proc.returncode == 0
+    assert proc.stdout.strip() == f"companion {version('companion')}"
