@@ -74,7 +74,7 @@ class PolicyConfig:
     deadband_deg: float = field(default=3.0, metadata=_range(0.0, 45.0))
     turn_time_s: float = field(default=1.0, metadata=_range(0.05, 60.0))
     max_yaw_rate_deg_s: float = field(default=30.0, metadata=_range(1.0, 360.0))
-    min_avoid_deg: float = field(default=25.0, metadata=_range(0.0, 60.0))
+    min_avoid_deg: float = field(default=30.0, metadata=_range(0.0, 60.0))
     resume_course: bool = True
     resume_after_s: float = field(default=1.0, metadata=_range(0.0, 60.0))
     resume_max_rate_deg_s: float = field(default=10.0, metadata=_range(0.5, 90.0))
