@@ -221,10 +221,11 @@ def test_the_heading_is_held_in_closed_loop_and_the_course_resumed_after_the_obs
 def test_a_face_close_to_the_course_is_passed_at_least_min_avoid_deg_off_it():
     step = engaged(yaw_deg=10.0)  # course 10°
     step = see(step.state, 0.1, -12.0, "left", 10.0)  # face at -2°: 12° left of the course
-    assert step.state.target_deg == pytest.approx(10.0 - POLICY.min_avoid_deg)
-    # Once there, η reads +13° (the face is right of the heading) but no turn back:
-    step = see(step.state, 1.5, 13.0, "right", -15.0)
-    assert step.state.target_deg == pytest.approx(-15.0) and step.yaw_rate_deg_s == 0.0
+    there = 10.0 - POLICY.min_avoid_deg
+    assert step.state.target_deg == pytest.approx(there)
+    # Once there, η reads the face right of the heading but there is no turn back:
+    step = see(step.state, 1.5, -2.0 - there, "right", there)
+    assert step.state.target_deg == pytest.approx(there) and step.yaw_rate_deg_s == 0.0
 
 
 def test_a_turn_held_back_by_the_reversal_rule_keeps_the_target_and_hold_only_stops():
