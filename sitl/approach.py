@@ -65,8 +65,8 @@ from sitl.scene import (
     Room,
     Rug,
     Scene,
-    _colour,
-    _decorations,
+    random_colour,
+    random_decorations,
     render_image,
     scene_truth,
 )
@@ -153,7 +153,8 @@ def draw_approach(seed: int, run: int) -> Approach:
     length, width = u(*ROOM_LENGTH_M), u(*ROOM_WIDTH_M)
     room0 = Room(x_min=0.0, x_max=length, y_min=-width / 2, y_max=width / 2,
                  height=u(*ROOM_HEIGHT_M), tile_m=float(rng.choice([0.3, 0.4, 0.5, 0.6])),
-                 floor_albedo=_colour(rng, 0.4, 0.75), wall_albedo=_colour(rng, 0.6, 0.85))
+                 floor_albedo=random_colour(rng, 0.4, 0.75),
+                 wall_albedo=random_colour(rng, 0.6, 0.85))
     sx, sy = START_FROM_WALL_M, u(-START_OFF_MIDDLE_M, START_OFF_MIDDLE_M)
     course = u(-COURSE_OFF_AXIS_DEG, COURSE_OFF_AXIS_DEG)
     ahead, off = u(*OBSTACLE_AHEAD_M), u(-OBSTACLE_OFF_LINE_M, OBSTACLE_OFF_LINE_M)
@@ -162,12 +163,12 @@ def draw_approach(seed: int, run: int) -> Approach:
     obstacle = Box(sx + ahead * math.cos(c) - off * math.sin(c),
                    sy + ahead * math.sin(c) + off * math.cos(c),
                    float(rel + 90.0 * rng.integers(0, 4)), u(*OBSTACLE_LENGTH_M),
-                   u(*OBSTACLE_WIDTH_M), 1.0, _colour(rng, 0.15, 0.6))
+                   u(*OBSTACLE_WIDTH_M), 1.0, random_colour(rng, 0.15, 0.6))
     boxes = [obstacle]
     for _ in range(int(rng.integers(FURNITURE[0], FURNITURE[1] + 1))):
         side = rng.choice([-1.0, 1.0])
         b = Box(u(2.0, length - 1.0), 0.0, float(90.0 * rng.integers(0, 2)), u(0.5, 1.4),
-                u(0.4, 0.8), u(0.5, 2.0), _colour(rng, 0.15, 0.6))
+                u(0.4, 0.8), u(0.5, 2.0), random_colour(rng, 0.15, 0.6))
         reach = b.radius()
         b = replace(b, y=side * (width / 2 - 0.15 - reach - u(0.0, 0.5)))
         if all(math.hypot(b.x - o.x, b.y - o.y) > reach + o.radius() + 0.3 for o in boxes):
@@ -176,8 +177,8 @@ def draw_approach(seed: int, run: int) -> Approach:
     rug = None
     if clutter:
         rug = Rug(u(3.0, length - 2.0), u(-width / 4, width / 4), u(10.0, 80.0), u(1.2, 2.5),
-                  u(0.8, 1.6), _colour(rng, 0.2, 0.6))
-    room = replace(room0, decorations=_decorations(rng, room0, clutter), rug=rug)
+                  u(0.8, 1.6), random_colour(rng, 0.2, 0.6))
+    room = replace(room0, decorations=random_decorations(rng, room0, clutter), rug=rug)
     return Approach(
         run=run, room=room, boxes=tuple(boxes), start_x_m=sx, start_y_m=sy, course_deg=course,
         altitude_m=u(*ALTITUDE_M), speed_m_s=u(*SPEED_M_S), hfov_deg=u(*HFOV_DEG),

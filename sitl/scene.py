@@ -38,6 +38,8 @@ __all__ = [
     "ObstacleTruth",
     "SceneTruth",
     "render",
+    "random_colour",
+    "random_decorations",
     "random_scene",
     "write_video",
     "yaw_sweep",
@@ -519,12 +521,15 @@ def render(scene: Scene, cam: Camera, supersample: int = 2) -> tuple[np.ndarray,
 # --------------------------------------------------------------------------- generators
 
 
-def _colour(rng: np.random.Generator, lo: float, hi: float) -> tuple[float, float, float]:
+def random_colour(rng: np.random.Generator, lo: float, hi: float) -> tuple[float, float, float]:
+    """A BGR albedo (0..1) near a grey level drawn from ``lo``..``hi``."""
     base = rng.uniform(lo, hi)
     return tuple(float(np.clip(base + rng.uniform(-0.12, 0.12), 0.05, 0.95)) for _ in range(3))
 
 
-def _decorations(rng: np.random.Generator, room: Room, clutter: bool) -> tuple[WallRect, ...]:
+def random_decorations(rng: np.random.Generator, room: Room, clutter: bool
+                       ) -> tuple[WallRect, ...]:
+    """Doors, windows and pictures on every wall; with ``clutter``, tilted pictures too."""
     out = []
     lengths = {
         NORTH: room.y_max - room.y_min,
@@ -545,7 +550,7 @@ def _decorations(rng: np.random.Generator, room: Room, clutter: bool) -> tuple[W
                 t = b + rng.uniform(0.3, 0.7)
             along = rng.uniform(0.2, max(0.3, length - w - 0.2))
             out.append(
-                WallRect(wall, along, w, b, min(t, room.height - 0.1), _colour(rng, 0.2, 0.7))
+                WallRect(wall, along, w, b, min(t, room.height - 0.1), random_colour(rng, 0.2, 0.7))
             )
         if clutter and rng.random() < 0.5:
             w = rng.uniform(0.3, 0.6)
@@ -556,7 +561,7 @@ def _decorations(rng: np.random.Generator, room: Room, clutter: bool) -> tuple[W
                     w,
                     1.3,
                     1.3 + rng.uniform(0.3, 0.5),
-                    _colour(rng, 0.2, 0.6),
+                    random_colour(rng, 0.2, 0.6),
                     tilt_deg=float(rng.uniform(10, 35) * rng.choice([-1, 1])),
                 )
             )
@@ -586,8 +591,8 @@ def random_scene(
         y_max=wid / 2,
         height=room_h,
         tile_m=float(rng.choice([0.3, 0.4, 0.5, 0.6])),
-        floor_albedo=_colour(rng, 0.4, 0.75),
-        wall_albedo=_colour(rng, 0.6, 0.85),
+        floor_albedo=random_colour(rng, 0.4, 0.75),
+        wall_albedo=random_colour(rng, 0.6, 0.85),
     )
     cam = Camera(
         width=width,
@@ -629,7 +634,7 @@ def random_scene(
                 float(rng.uniform(0.6, 1.6)),
                 float(rng.uniform(0.4, 1.0)),
                 float(rng.uniform(0.5, 1.6)),
-                _colour(rng, 0.15, 0.6),
+                random_colour(rng, 0.15, 0.6),
             )
             if free(x, y, b.radius()):
                 boxes.append(b)
@@ -648,7 +653,7 @@ def random_scene(
                 float(rng.uniform(0.5, 1.5)),
                 float(rng.uniform(0.4, 1.0)),
                 float(rng.uniform(0.4, 1.8)),
-                _colour(rng, 0.15, 0.6),
+                random_colour(rng, 0.15, 0.6),
             )
             if free(b.x, b.y, b.radius()):
                 boxes.append(b)
@@ -661,9 +666,9 @@ def random_scene(
             float(rng.uniform(10, 80)),
             float(rng.uniform(1.2, 2.5)),
             float(rng.uniform(0.8, 1.6)),
-            _colour(rng, 0.2, 0.6),
+            random_colour(rng, 0.2, 0.6),
         )
-    room = replace(room0, decorations=_decorations(rng, room0, clutter), rug=rug)
+    room = replace(room0, decorations=random_decorations(rng, room0, clutter), rug=rug)
     scene = Scene(
         room=room,
         boxes=tuple(boxes),
