@@ -44,12 +44,12 @@ at the altitude the vehicle actually reports.
 
 from __future__ import annotations
 
-import asyncio
 import math
 import multiprocessing
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -58,7 +58,7 @@ import cv2
 import numpy as np
 
 from companion.config import Config, MavlinkConfig
-from companion.control.policy import TurnHistory, confirm_reversal, decide_turn
+from companion.control.policy import TurnHistory, confirm_reversal, decide_turn, wrap_deg
 from sitl.scene import (
     Box,
     Camera,
@@ -232,7 +232,7 @@ class FrameMap:
         dn, de = north_m - self.north0_m, east_m - self.east0_m
         x = self.start_x_m + math.cos(turn) * dn - math.sin(turn) * de
         y = self.start_y_m + math.sin(turn) * dn + math.cos(turn) * de
-        heading = (yaw_deg + self.course_deg - self.yaw0_deg + 180.0) % 360.0 - 180.0
+        heading = wrap_deg(yaw_deg + self.course_deg - self.yaw0_deg)
         return x, y, heading
 
 
@@ -279,6 +279,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     ``autopilot_url``, against an autopilot that is already running (real time)."""
     from companion.control.offboard import OffboardController
     from companion.vision.pipeline import Pipeline
+    from sitl.closed_loop import fly_alongside
 
     if policy not in POLICIES:
         raise ValueError(f"--policy {policy}: must be one of {', '.join(POLICIES)}")
@@ -332,15 +333,15 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
         """Wait until the vehicle hovers after takeoff (its altitude steady to 2 cm for a
         second); its pose then."""
         deadline = time.monotonic() + 90.0
-        recent: list[float] = []
+        recent: deque[float] = deque(maxlen=max(1, round(1.0 / period_s)) + 1)  # 1 s of frames
         while time.monotonic() < deadline and not session_over.is_set():
             advance()
             pose = controller.pose
             if pose is None or -pose.down_m < 0.5 or controller.state.name != "waiting":
                 recent.clear()
                 continue
-            recent = [*recent, pose.down_m][-max(2, round(1.0 / period_s) + 1):]
-            if len(recent) > round(1.0 / period_s) and max(recent) - min(recent) < 0.02:
+            recent.append(pose.down_m)
+            if len(recent) == recent.maxlen and max(recent) - min(recent) < 0.02:
                 return pose
         raise TimeoutError("the vehicle did not take off and hover")
 
@@ -369,7 +370,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             result.frames += 1
             result.time_s = controller.clock() - t_start
             result.max_turn_deg = max(result.max_turn_deg,
-                                      abs((heading - ap.course_deg + 180.0) % 360.0 - 180.0))
+                                      abs(wrap_deg(heading - ap.course_deg)))
             # The body between the last pose and this one, so a fast frame cannot skip a wall.
             samples = [(x, y)] if prev_xy is None else [
                 (prev_xy[0] + s * (x - prev_xy[0]), prev_xy[1] + s * (y - prev_xy[1]))
@@ -411,23 +412,11 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     try:
         if mock is not None:
             mock.start()
-        asyncio.run(_fly(controller, _guarded(camera, result), session_over))
+        fly_alongside(controller, _guarded(camera, result), session_over=session_over)
     finally:
         if mock is not None:
             mock.stop()
     return result
-
-
-async def _fly(controller, camera: Callable[[], None], session_over: threading.Event) -> None:
-    """The controller's MAVSDK session and ``camera`` (in a thread) side by side, until
-    the camera is done; a session that ends first (no autopilot) stops the camera. Raises
-    what the session raised."""
-    stop = asyncio.Event()
-    session = asyncio.ensure_future(controller.run(stop))
-    session.add_done_callback(lambda _: session_over.set())
-    await asyncio.to_thread(camera)
-    stop.set()
-    await session
 
 
 def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None

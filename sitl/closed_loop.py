@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import math
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -145,12 +146,16 @@ def hovering_autopilot(port: int, **params):
 
 
 def fly_alongside(controller: OffboardController, camera: Callable[[], None],
-                  linger_s: float = 0.0) -> None:
+                  linger_s: float = 0.0, session_over: threading.Event | None = None) -> None:
     """Run ``controller``'s MAVSDK session while ``camera`` runs in a thread; ``linger_s``
-    after the camera returns, stop the session and wait for its safe stop."""
+    after the camera returns, stop the session and wait for its safe stop. Raises what the
+    session raised. ``session_over`` is set when the session ends, so that a camera can
+    stop when it ends first (no autopilot answered)."""
     async def fly() -> None:
         stop = asyncio.Event()
         session = asyncio.ensure_future(controller.run(stop))
+        if session_over is not None:
+            session.add_done_callback(lambda _: session_over.set())
         await asyncio.to_thread(camera)
         await asyncio.sleep(linger_s)
         stop.set()

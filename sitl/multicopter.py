@@ -22,6 +22,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from companion.control.policy import wrap_deg
+
 __all__ = ["Motion", "Response", "step"]
 
 G_M_S2 = 9.81
@@ -87,7 +89,7 @@ def step(m: Motion, cmd_ned_m_s: tuple[float, float, float], cmd_yaw_rate_deg_s:
     m.down_m = min(0.0, m.down_m + after[2] * dt)
     m.yaw_rate_deg_s += (cmd_yaw_rate_deg_s * r.yaw_gain - m.yaw_rate_deg_s) * min(
         1.0, dt / r.yaw_tau_s)
-    m.yaw_deg = (m.yaw_deg + m.yaw_rate_deg_s * dt + 180.0) % 360.0 - 180.0
+    m.yaw_deg = wrap_deg(m.yaw_deg + m.yaw_rate_deg_s * dt)
     # Tilt from the horizontal acceleration in the body frame.
     yaw = math.radians(m.yaw_deg)
     an, ae = ((a - b) / dt for a, b in zip(after[:2], before[:2], strict=True))
