@@ -76,7 +76,7 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--no-focal",
         action="store_true",
-        help="do not give the pipeline the rendered focal length (it assumes half the width)",
+        help="do not give the pipeline the rendered focal length (it estimates it)",
     )
     ev.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     ev.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
@@ -161,8 +161,8 @@ def dry_run(args) -> int:
     if cfg.camera.focal_px:
         focal = f"focal {cfg.camera.focal_px:g} px (given)"
     else:
-        focal = ("focal estimated per frame from the layout VPs, else half the width "
-                 "(90° field of view); D of eq. 10 = half the width")
+        focal = ("focal length estimated from the layout VPs, carried from frame to frame "
+                 "(half the width until a frame gives it); D of eq. 10 = that focal length")
     if folder:
         print(f"{video.path}: {len(video)} images; {focal}")
     else:

@@ -8,7 +8,7 @@ import pytest
 from companion.config import Config
 from companion.vision.pipeline import STAGES, Pipeline
 from sitl.sample import sample_scene
-from sitl.scene import Box, Camera, Scene, render
+from sitl.scene import Box, Camera, Scene, render, yaw_sweep
 
 
 def _pipeline(focal):
@@ -76,6 +76,37 @@ def test_without_a_focal_length_it_is_estimated_from_the_room(hfov_deg):
     est = Pipeline()(image)
     assert est.focal_source == "estimated"
     assert est.focal_px == pytest.approx(cam.focal_px, rel=0.02)
+
+
+def test_the_focal_estimate_is_carried_from_frame_to_frame_and_is_d_of_eq10():
+    # A 60° lens, no focal length given: D of eq. 10 must become the focal length (554 px),
+    # not half the width (320 px), or every η is scaled wrong.
+    scene, cam = sample_scene()
+    cam = replace(cam, hfov_deg=60.0, pitch_deg=3.0)
+    pipe = Pipeline()
+    errors = []
+    for k, c in enumerate(yaw_sweep(cam, -4.0, 8.0, 8)):
+        image, truth = render(replace(scene, seed=scene.seed + k), c)
+        est = pipe(image)
+        assert est.depth_px == pipe.running_focal.focal_px
+        if est.eta_deg is not None:
+            errors.append(abs(est.eta_deg - truth.obstacles[0].eta_deg))
+    assert pipe.running_focal.settled
+    assert pipe.running_focal.focal_px == pytest.approx(cam.focal_px, rel=0.03)
+    # The last frame was searched with the running estimate alone (one VP search).
+    assert est.focal_source == "estimated"
+    assert est.focal_px == pytest.approx(pipe.running_focal.focal_px, rel=0.02)
+    assert len(errors) >= 6 and np.median(errors) < 1.5
+
+
+def test_a_configured_depth_overrides_the_focal_length():
+    scene, cam = sample_scene()
+    image, _ = render(scene, cam)
+    cfg = Config()
+    est = Pipeline(replace(cfg, heading=replace(cfg.heading, depth_px=240.0)))(image)
+    assert est.depth_px == 240.0
+    assert est.eta_deg is not None
+    assert est.m_px[0] / 240.0 == pytest.approx(np.tan(np.radians(est.eta_deg)))
 
 
 def test_empty_frame_with_no_lines():

@@ -29,7 +29,7 @@ from companion.vision.lines import extend_segments, filter_segments, make_detect
 from companion.vision.obstacles import Obstacle, find_obstacles
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
-__all__ = ["Estimate", "Pipeline", "STAGES"]
+__all__ = ["Estimate", "Pipeline", "RunningFocal", "STAGES"]
 
 STAGES = ("lines", "vps", "corners", "obstacles", "heading")
 
@@ -43,6 +43,38 @@ pick the wrong V1–V2 pair, so a narrow or a wide lens needs a guess of its own
 
 FOCAL_RANGE = (0.2, 3.0)
 """estimates outside these frame widths (fields of view of 136° and 19°) are discarded"""
+
+FOCAL_MEMORY = 31
+"""frames of focal-length estimates the running estimate is the median of"""
+
+FOCAL_WARMUP = 5
+"""estimates gathered by full per-frame self-calibration before the running estimate is
+trusted as the one guess a frame is searched with"""
+
+
+@dataclass(frozen=True)
+class RunningFocal:
+    """The focal length of one video or camera, estimated from frame to frame.
+
+    ``estimates_px``: the last :data:`FOCAL_MEMORY` per-frame estimates (pixels), oldest
+    first. The running estimate is their median, so a frame whose V1–V2 pair was wrong
+    cannot move it far. Pure value: :meth:`add` returns a new one.
+    """
+
+    estimates_px: tuple[float, ...] = ()
+
+    @property
+    def focal_px(self) -> float | None:
+        """The running estimate in pixels, None before the first frame gave one."""
+        return float(np.median(self.estimates_px)) if self.estimates_px else None
+
+    @property
+    def settled(self) -> bool:
+        """Whether enough frames agreed to search the next frame with this focal alone."""
+        return len(self.estimates_px) >= FOCAL_WARMUP
+
+    def add(self, focal_px: float) -> RunningFocal:
+        return RunningFocal((self.estimates_px + (float(focal_px),))[-FOCAL_MEMORY:])
 
 
 def _orthogonal_focal(layout: LayoutVPs, centre: np.ndarray) -> float | None:
@@ -65,7 +97,7 @@ class Estimate:
     ``stage_ms``: wall time per stage in milliseconds (keys :data:`STAGES`).
     ``focal_px``: the focal length the layout rests on, ``focal_source`` where it came from
     (given, estimated, assumed); ``depth_px``: D of eq. 10 (configured, else the given
-    focal length, else half the width: the paper's Table IV).
+    focal length, else the video's running estimate of it, else half the width).
     """
 
     eta_deg: float | None
@@ -104,6 +136,8 @@ class Pipeline:
     def __init__(self, config: Config | None = None):
         self.config = config or Config()
         self._detectors: dict[float, object] = {}
+        self.running_focal = RunningFocal()
+        self._focal_size: tuple[int, int] | None = None
         vp = self.config.vision.vanishing
         self._known_focal_vp = replace(
             vp, orthogonal_tol_deg=vp.known_focal_orthogonal_tol_deg,
@@ -120,44 +154,70 @@ class Pipeline:
                                                  self.config.vision.edge_threshold)
         return self._detectors[key], min_len
 
-    def focal_for(self, width: int) -> float:
-        """Focal length in pixels: configured, else half the width (90° field of view)."""
-        return self.config.camera.focal_px or width / 2.0
-
     def _layout(self, segments: np.ndarray, w: int, h: int) -> tuple[LayoutVPs, str]:
         """Layout VPs, and where the focal length they rest on came from.
 
-        ``given``: configured. Otherwise self-calibration: V1 and V2 found with an
-        assumed focal length (each of ``SELF_CALIBRATION_GUESSES`` in turn) are orthogonal
-        in space, so when both are finite they fix ``f``
-        (:func:`focal_from_orthogonal_vps`); the VPs are then found again with it
-        (``estimated``). An estimate is taken at once when the VPs found with it give it
-        back (within ``SELF_CALIBRATION_TOL``), else only if no guess does better. Else
-        ``assumed``. With a given focal length V1 ⟂ V2 is
-        checked with the tighter ``known_focal_orthogonal_tol_deg``.
+        ``given``: configured. With a given focal length V1 ⟂ V2 is checked with the
+        tighter ``known_focal_orthogonal_tol_deg``.
+
+        Otherwise self-calibration: V1 and V2 are orthogonal in space, so when both are
+        finite they fix ``f`` (:func:`focal_from_orthogonal_vps`), and each frame's
+        estimate joins the video's :class:`RunningFocal`. Once that has settled, a frame
+        is searched with the running estimate alone (``estimated``): one VP search per
+        frame instead of several. Until then each frame calibrates itself: VPs found with
+        an assumed focal length (each of ``SELF_CALIBRATION_GUESSES`` in turn) give ``f``,
+        and the VPs are found again with it (``estimated``); an estimate is taken at once
+        when the VPs found with it give it back (within ``SELF_CALIBRATION_TOL``), else
+        only if no guess does better. Else ``assumed``.
         """
         vp = self.config.vision.vanishing
         if self.config.camera.focal_px:
             return detect_layout_vps(segments, w, h, self.config.camera.focal_px,
                                      self._known_focal_vp), "given"
+        if self._focal_size != (w, h):  # another camera: its lens is another question
+            self._focal_size, self.running_focal = (w, h), RunningFocal()
         centre = principal_point(w, h)
+
+        def estimate(layout):
+            f = _orthogonal_focal(layout, centre)
+            return f if f is not None and FOCAL_RANGE[0] * w <= f <= FOCAL_RANGE[1] * w else None
+
+        if self.running_focal.settled:
+            layout = detect_layout_vps(segments, w, h, self.running_focal.focal_px, vp)
+            f = estimate(layout)
+            if f is not None:
+                self.running_focal = self.running_focal.add(f)
+            return layout, "estimated"
+
         first = unconfirmed = None
         for guess in (g * w for g in SELF_CALIBRATION_GUESSES):
             layout = detect_layout_vps(segments, w, h, guess, vp)
             first = first or layout
-            f = _orthogonal_focal(layout, centre)
-            if f is None or not FOCAL_RANGE[0] * w <= f <= FOCAL_RANGE[1] * w:
+            f = estimate(layout)
+            if f is None:
                 continue
             again = detect_layout_vps(segments, w, h, f, vp)
             f_again = _orthogonal_focal(again, centre)
             # A frame picked under a wrong guess can imply a focal length under which a
             # different frame wins; a true estimate is a fixed point.
             if f_again is not None and abs(f_again - f) <= SELF_CALIBRATION_TOL * f:
+                self.running_focal = self.running_focal.add(f)
                 return again, "estimated"
             unconfirmed = unconfirmed or again
         if unconfirmed is not None:
+            self.running_focal = self.running_focal.add(unconfirmed.focal_px)
             return unconfirmed, "estimated"
         return first, "assumed"
+
+    def depth_for(self, width: int) -> float:
+        """D of eq. 10 in pixels: ``heading.depth_px`` if set, else the focal length
+        (given, else this video's running estimate, else half the width). Only with
+        D = f is η the bearing of the obstacle face."""
+        if self.config.heading.depth_px:
+            return self.config.heading.depth_px
+        if self.config.camera.focal_px:
+            return self.config.camera.focal_px
+        return self.running_focal.focal_px or width / 2.0
 
     def segments(self, frame: np.ndarray) -> np.ndarray:
         """Stage 1: the frame's line segments (N×4 pixels), filtered and capped."""
@@ -178,8 +238,6 @@ class Pipeline:
         """Run every stage on a BGR or grey ``frame`` (H×W[×3] uint8)."""
         vc = self.config.vision
         h, w = frame.shape[:2]
-        focal = self.focal_for(w)
-        depth = self.config.heading.depth_px or focal
         centre = principal_point(w, h)
         ms: dict[str, float] = {}
 
@@ -223,6 +281,7 @@ class Pipeline:
         t4 = time.perf_counter()
         ms["obstacles"] = (t4 - t3) * 1e3
 
+        depth = self.depth_for(w)
         eta = phi = m = None
         if obstacles:
             ovps = obstacles[0].ovps[:2]
