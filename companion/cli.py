@@ -82,8 +82,15 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
     ev.add_argument("--yud", metavar="DIR",
                     help="instead: layout-VP accuracy on the York Urban Database in DIR")
-    ev.add_argument("--split", choices=("train", "test", "all"), default="test",
-                    help="YUD split (default test; tune on train only)")
+    ev.add_argument("--renderer", choices=("scene", "pathtraced", "all"),
+                    help="instead: the frozen dev and test splits of this renderer (pathtraced "
+                         "needs companion[render]), focal length not given, at 640×480 90°, "
+                         "640×480 60° and 320×240 90°")
+    ev.add_argument("--clips", action="store_true",
+                    help="with --renderer scene: per-frame and tracked η on yawing clips")
+    ev.add_argument("--split", choices=("dev", "train", "test", "all"), default=None,
+                    help="with --renderer: dev, test or all (default all); with --yud: train "
+                         "(= dev), test (default) or all. Tune on dev/train only")
     ev.add_argument("--no-peer", action="store_true",
                     help="with --yud: do not run the peer lu-vp-detect even if installed")
     ev.add_argument("--variants", action="store_true",
@@ -220,7 +227,12 @@ def run_eval(args) -> int:
     from sitl.evaluate import run_eval as evaluate
 
     if args.yud:
+        args.split = {"dev": "train", None: "test"}.get(args.split, args.split)
         return run_eval_yud(args)
+    if args.renderer:
+        return run_eval_splits(args)
+    if args.split:
+        raise UserError("--split needs --renderer NAME or --yud DIR")
     if args.variants:
         raise UserError("--variants needs --yud DIR (views of the York Urban DB photographs)")
     if args.scenes < 1:
@@ -248,6 +260,72 @@ def run_eval(args) -> int:
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(report.figures(), f, indent=2)
+    return 0
+
+
+def run_eval_splits(args) -> int:
+    """``companion eval --renderer R [--split S]``: the frozen splits, one table per renderer."""
+    from sitl.evaluate import SPLITS, format_splits, run_split
+
+    renderers = ("scene", "pathtraced") if args.renderer == "all" else (args.renderer,)
+    if "pathtraced" in renderers:
+        from sitl.pathtraced import available
+
+        if not available():
+            raise UserError("the pathtraced renderer needs Mitsuba 3: "
+                            "pip install 'companion[render]'")
+    split = {"train": "dev", None: "all"}.get(args.split, args.split)
+    splits = ("dev", "test") if split == "all" else (split,)
+    cfg = _config(args.eval_config, None)
+    start = time.perf_counter()
+    if args.clips:
+        return _eval_clips(args, renderers, splits, cfg, start)
+    figures = {}
+    for renderer in renderers:
+        reports = {}
+        for s in splits:
+            seed, n = SPLITS[(renderer, s)]
+            progress = _Progress(True)
+            try:
+                reports[s] = run_split(renderer, s, cfg, args.workers,
+                                       lambda d, t, p=progress, r=renderer, s=s: p.update(
+                                           d, t, f"{r} {s}"))
+            finally:
+                progress.close()
+        for line in format_splits(renderer, reports):
+            print(line)
+        figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
+                             for s, by_cam in reports.items()}
+    took = time.perf_counter() - start
+    print(f"({took:.0f} s; companion eval --renderer {args.renderer}"
+          + (f" --split {split})" if split != "all" else ")"))
+    if args.json:
+        with _open_output(args.json, "figures") as f:
+            json.dump(figures, f, indent=2)
+    return 0
+
+
+def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
+    from sitl.evaluate import clip_figures, format_clips, run_clips
+
+    if renderers != ("scene",):
+        raise UserError("--clips is measured on --renderer scene only")
+    by_split = {}
+    for s in splits:
+        progress = _Progress(True)
+        try:
+            by_split[s] = run_clips(s, cfg, args.workers,
+                                    lambda d, t, p=progress, s=s: p.update(d, t, f"clips {s}"))
+        finally:
+            progress.close()
+    for line in format_clips(by_split):
+        print(line)
+    print(f"({time.perf_counter() - start:.0f} s; companion eval --renderer scene --clips"
+          + (f" --split {splits[0]})" if len(splits) == 1 else ")"))
+    if args.json:
+        with _open_output(args.json, "figures") as f:
+            json.dump({s: {"per_frame": clip_figures(fr, False), "tracked": clip_figures(fr, True)}
+                       for s, fr in by_split.items()}, f, indent=2)
     return 0
 
 

@@ -575,8 +575,12 @@ def random_scene(
     obstacle: bool = True,
     aligned_boxes: int | None = None,
     clutter: bool = True,
+    hfov_deg: float | None = None,
 ) -> tuple[Scene, Camera]:
     """A random room, camera and boxes (all randomness from ``rng``).
+
+    The field of view is ``hfov_deg``, else drawn from 60–90° (drawn either way, so
+    that the rest of the scene does not depend on it).
 
     With ``obstacle`` one box is rotated 12°–45° off the room's axes and placed 2.2–5 m
     ahead inside the field of view; ``aligned_boxes`` (random 0–2 by default, 1–3 without
@@ -594,10 +598,11 @@ def random_scene(
         floor_albedo=random_colour(rng, 0.4, 0.75),
         wall_albedo=random_colour(rng, 0.6, 0.85),
     )
+    drawn_fov = float(rng.uniform(60.0, 90.0))
     cam = Camera(
         width=width,
         height=height,
-        hfov_deg=float(rng.uniform(60.0, 90.0)),
+        hfov_deg=hfov_deg or drawn_fov,
         x=float(rng.uniform(0.8, 2.0)),
         y=float(rng.uniform(-wid / 4, wid / 4)),
         height_m=float(rng.uniform(0.8, 1.8)),

@@ -27,6 +27,7 @@ from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
+from companion.vision.tracking import Track, update_track
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
 __all__ = ["Estimate", "Pipeline", "RunningFocal", "STAGES"]
@@ -50,6 +51,16 @@ FOCAL_MEMORY = 31
 FOCAL_WARMUP = 5
 """estimates gathered by full per-frame self-calibration before the running estimate is
 trusted as the one guess a frame is searched with"""
+
+
+def _room_eta(layout: LayoutVPs, centre: np.ndarray, depth_px: float) -> float | None:
+    """Eq. 10 for the observed horizontal layout VP nearest the centre (the room's η, which
+    the tracker measures obstacle faces against), None when neither V1 nor V2 was seen."""
+    rows = [k for k in (V1, V2) if layout.observed[k]]
+    if not rows:
+        return None
+    vps = layout.vps[rows]
+    return heading_from_vp(vps[closest_to_centre(vps, centre)], centre, depth_px).eta_deg
 
 
 @dataclass(frozen=True)
@@ -98,6 +109,8 @@ class Estimate:
     ``focal_px``: the focal length the layout rests on, ``focal_source`` where it came from
     (given, estimated, assumed); ``depth_px``: D of eq. 10 (configured, else the given
     focal length, else the video's running estimate of it, else half the width).
+    ``eta_tracked_deg``: η of the obstacle tracked across this video's frames
+    (:mod:`~companion.vision.tracking`), None without a confirmed track.
     """
 
     eta_deg: float | None
@@ -115,6 +128,7 @@ class Estimate:
     depth_px: float
     focal_source: str = "given"  # given | estimated (from V1 ⟂ V2) | assumed (width / 2)
     stage_ms: dict[str, float] = field(default_factory=dict)
+    eta_tracked_deg: float | None = None
 
     @property
     def latency_ms(self) -> float:
@@ -137,6 +151,7 @@ class Pipeline:
         self.config = config or Config()
         self._detectors: dict[float, object] = {}
         self.running_focal = RunningFocal()
+        self.track: Track | None = None
         self._focal_size: tuple[int, int] | None = None
         vp = self.config.vision.vanishing
         self._known_focal_vp = replace(
@@ -287,6 +302,8 @@ class Pipeline:
             ovps = obstacles[0].ovps[:2]
             hd = heading_from_vp(ovps[closest_to_centre(ovps, centre)], centre, depth)
             eta, phi, m = hd.eta_deg, hd.phi_deg, hd.m_px
+        self.track, eta_tracked = update_track(self.track, eta,
+                                               _room_eta(layout, centre, depth))
         ms["heading"] = (time.perf_counter() - t4) * 1e3
 
         return Estimate(
@@ -305,4 +322,5 @@ class Pipeline:
             focal_source=focal_source,
             depth_px=depth,
             stage_ms=ms,
+            eta_tracked_deg=eta_tracked,
         )

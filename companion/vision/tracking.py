@@ -1,0 +1,114 @@
+"""One obstacle followed across frames: η that does not flip, drop out or false-alarm.
+
+The paper estimates η frame by frame (eq. 10). A rotated obstacle standing in a Manhattan
+room has one thing that does not change while the vehicle yaws: its face's angle to the
+room's axes, ``rel = wrap90(η − η_room)``, where ``η_room`` is eq. 10 applied to a layout
+VP (V1 or V2) and ``wrap90`` folds an angle into (−45°, 45°] (a box's four faces and a
+room's four walls are each 90° apart). The track keeps that angle, so that
+
+- a new detection belongs to the track when its ``rel`` agrees within ``gate_deg``;
+- η is predicted, as ``rel + η_room`` taken modulo 90° nearest the last η, in frames
+  where the detection drops out (up to ``max_missed`` of them);
+- eq. 9's choice between the obstacle's two OVPs, which flips with noise when the face
+  is near 45° to the line of sight, is kept until the other OVP is nearer the frame centre
+  by more than ``switch_margin_deg``;
+- a detection seen in one frame only is not reported: a track is confirmed after
+  ``confirm_hits`` consistent frames.
+
+Inputs are plain values (the frame's η and the layout's η_room, degrees); the camera's
+yaw never has to be known, so a recording is tracked as well as a flight. Pure functions;
+:class:`~companion.vision.pipeline.Pipeline` holds the state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["TrackParams", "Track", "wrap90", "update_track"]
+
+
+def wrap90(angle_deg: float) -> float:
+    """``angle_deg`` folded into (−45°, 45°]."""
+    a = (angle_deg + 45.0) % 90.0 - 45.0
+    return 45.0 if a == -45.0 else a
+
+
+@dataclass(frozen=True)
+class TrackParams:
+    gate_deg: float = 6.0
+    """a detection whose face angle to the room differs more is another obstacle"""
+    confirm_hits: int = 2
+    """consistent frames before a track's η is reported"""
+    max_missed: int = 3
+    """frames a confirmed track is predicted through without a detection"""
+    switch_margin_deg: float = 8.0
+    """the other OVP takes over as eq. 9's M only when it is this much nearer the centre"""
+    smoothing: float = 0.5
+    """weight of a new detection in the track's face angle (1: no smoothing)"""
+
+
+@dataclass(frozen=True)
+class Track:
+    """``rel_deg``: the obstacle face's angle to the room axes, (−45°, 45°];
+    ``eta_deg``: its η in the last frame (the OVP eq. 9 currently follows);
+    ``hits``: consistent detections so far; ``missed``: frames since the last one."""
+
+    rel_deg: float
+    eta_deg: float
+    hits: int = 1
+    missed: int = 0
+
+    def confirmed(self, params: TrackParams) -> bool:
+        return self.hits >= params.confirm_hits
+
+
+def _nearest_branch(eta_deg: float, near_deg: float) -> float:
+    """``eta_deg`` + k·90° nearest ``near_deg``."""
+    return eta_deg + 90.0 * round((near_deg - eta_deg) / 90.0)
+
+
+def update_track(
+    track: Track | None,
+    eta_deg: float | None,
+    eta_room_deg: float | None,
+    params: TrackParams | None = None,
+) -> tuple[Track | None, float | None]:
+    """One frame: the new track and the tracked η in degrees (None: nothing to report).
+
+    ``eta_deg``: this frame's η (eq. 10), None without a detection; ``eta_room_deg``: eq. 10
+    of a horizontal layout VP, None when the layout was not seen (the track then holds its
+    last η while it lasts).
+    """
+    p = params or TrackParams()
+    if eta_deg is not None and eta_room_deg is not None:
+        rel = wrap90(eta_deg - eta_room_deg)
+        if track is not None and abs(wrap90(rel - track.rel_deg)) <= p.gate_deg:
+            # The same obstacle: keep the OVP being followed unless the other one is
+            # clearly nearer the centre.
+            kept = _nearest_branch(eta_deg, track.eta_deg)
+            eta = eta_deg if abs(eta_deg) + p.switch_margin_deg < abs(kept) else kept
+            new_rel = wrap90(track.rel_deg + p.smoothing * wrap90(rel - track.rel_deg))
+            track = Track(new_rel, eta, track.hits + 1, 0)
+        elif track is not None and track.confirmed(p) and track.missed < p.max_missed:
+            # Another obstacle, or a false alarm: the confirmed track is predicted on, and
+            # the newcomer must show up again to take over (it does: hits start at 1 each
+            # time, so a second consistent frame is needed after the track runs out).
+            return _predict(track, eta_room_deg, p)
+        else:
+            track = Track(rel, eta_deg)
+        return track, (track.eta_deg if track.confirmed(p) else None)
+    if track is None:
+        return None, None
+    return _predict(track, eta_room_deg, p)
+
+
+def _predict(track: Track, eta_room_deg: float | None, p: TrackParams
+             ) -> tuple[Track | None, float | None]:
+    """A frame without a consistent detection: predict from the room, or drop the track."""
+    if track.missed >= p.max_missed or not track.confirmed(p):
+        return None, None
+    eta = track.eta_deg
+    if eta_room_deg is not None:
+        eta = _nearest_branch(track.rel_deg + eta_room_deg, track.eta_deg)
+    track = Track(track.rel_deg, eta, track.hits, track.missed + 1)
+    return track, eta

@@ -1,0 +1,77 @@
+"""Tracking one obstacle across frames (companion/vision/tracking.py)."""
+
+import pytest
+
+from companion.vision.tracking import TrackParams, update_track, wrap90
+
+
+def _run(frames, params=None):
+    track, out = None, []
+    for eta, room in frames:
+        track, tracked = update_track(track, eta, room, params)
+        out.append(tracked)
+    return out
+
+
+def test_wrap90_folds_into_the_half_open_quarter():
+    assert wrap90(44.0) == 44.0
+    assert wrap90(46.0) == -44.0
+    assert wrap90(-45.0) == 45.0
+    assert wrap90(135.0) == 45.0
+    assert wrap90(-100.0) == pytest.approx(-10.0)
+
+
+def test_a_one_frame_detection_is_not_reported():
+    assert _run([(20.0, 3.0), (None, 3.0), (None, 3.0)]) == [None, None, None]
+
+
+def test_confirmed_after_two_consistent_frames():
+    out = _run([(20.0, 3.0), (20.4, 3.0), (20.2, 3.0)])
+    assert out[0] is None
+    assert out[1] == pytest.approx(20.4) and out[2] == pytest.approx(20.2)
+
+
+def test_eq9_flip_near_45_degrees_is_held():
+    # A face 44–46° to the line of sight: the frame's M jumps between the two OVPs, 90°
+    # apart, and η changes sign. The track keeps following one of them.
+    frames = [(44.0, 0.0), (44.5, 0.0), (-44.2, 0.0), (44.8, 0.0), (-43.9, 0.0)]
+    out = _run(frames)
+    assert out[1:] == pytest.approx([44.5, 45.8, 44.8, 46.1])
+
+
+def test_the_other_ovp_takes_over_once_clearly_nearer_the_centre():
+    # The vehicle yaws 5° a frame: the room's η and the obstacle's move together.
+    frames = [(40.0 - 5 * k, -5.0 * k) for k in range(8)]
+    frames = [((e + 45.0) % 90.0 - 45.0, r) for e, r in frames]  # what eq. 9 reports
+    out = _run(frames)
+    assert out[1] == pytest.approx(35.0)
+    assert out[-1] == pytest.approx(5.0)  # 40 − 35: followed through 0° without a jump
+
+
+def test_a_dropout_is_bridged_by_the_room_and_then_the_track_ends():
+    p = TrackParams(max_missed=2)
+    frames = [(20.0, 0.0), (20.0, 0.0), (None, 4.0), (None, 6.0), (None, 6.0)]
+    out = _run(frames, p)
+    assert out[2] == pytest.approx(24.0) and out[3] == pytest.approx(26.0)
+    assert out[4] is None
+
+
+def test_a_dropout_without_the_room_holds_the_last_eta():
+    out = _run([(20.0, 0.0), (20.0, 0.0), (None, None)])
+    assert out[2] == pytest.approx(20.0)
+
+
+def test_a_false_alarm_beside_a_confirmed_track_does_not_move_it():
+    frames = [(20.0, 0.0), (20.0, 0.0), (-30.0, 0.0), (20.2, 0.0)]
+    out = _run(frames)
+    assert out[2] == pytest.approx(20.0)  # predicted, not −30
+    assert out[3] == pytest.approx(20.2)
+
+
+def test_another_obstacle_takes_over_when_the_track_runs_out():
+    p = TrackParams(max_missed=1)
+    frames = [(20.0, 0.0), (20.0, 0.0), (-30.0, 0.0), (-30.0, 0.0), (-30.0, 0.0), (-30.5, 0.0)]
+    out = _run(frames, p)
+    assert out[2] == pytest.approx(20.0)
+    assert out[3] is None  # the old track ended; the newcomer starts unconfirmed
+    assert out[4] == pytest.approx(-30.0) and out[5] == pytest.approx(-30.5)
