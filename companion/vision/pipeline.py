@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from companion.config import Config
+from companion.config import Config, VisionConfig
 from companion.vision.corners import (
     Corners,
     find_corners,
@@ -44,6 +44,9 @@ pick the wrong V1–V2 pair, so a narrow or a wide lens needs a guess of its own
 
 FOCAL_RANGE = (0.2, 3.0)
 """estimates outside these frame widths (fields of view of 136° and 19°) are discarded"""
+
+REFERENCE_DIAGONAL_PX = 800.0
+"""the diagonal of the 640×480 frame the configured sizes in pixels are meant for"""
 
 FOCAL_MEMORY = 31
 """frames of focal-length estimates the running estimate is the median of"""
@@ -152,6 +155,7 @@ class Pipeline:
         self._detectors: dict[float, object] = {}
         self.running_focal = RunningFocal()
         self.track: Track | None = None
+        self._vision: dict[tuple[int, int], VisionConfig] = {}
         self._focal_size: tuple[int, int] | None = None
         vp = self.config.vision.vanishing
         self._known_focal_vp = replace(
@@ -249,9 +253,25 @@ class Pipeline:
         h, w = frame.shape[:2]
         return self._layout(self.segments(frame), w, h)
 
+    def vision_for(self, width: int, height: int) -> VisionConfig:
+        """The vision settings for frames of ``width``×``height``: the sizes of things in
+        the picture (corner radius, leg growth, shortest obstacle edge) are configured
+        for a 640×480 frame and scale with the diagonal, as the picture does; tolerances
+        for pixel noise (residuals, λ1) stay in pixels."""
+        key = (width, height)
+        if key not in self._vision:
+            vc = self.config.vision
+            s = float(np.hypot(width, height)) / REFERENCE_DIAGONAL_PX
+            self._vision[key] = replace(
+                vc,
+                corners=replace(vc.corners, radius_px=vc.corners.radius_px * s,
+                                leg_growth_px=vc.corners.leg_growth_px * s),
+                obstacles=replace(vc.obstacles, min_edge_px=vc.obstacles.min_edge_px * s))
+        return self._vision[key]
+
     def __call__(self, frame: np.ndarray) -> Estimate:
         """Run every stage on a BGR or grey ``frame`` (H×W[×3] uint8)."""
-        vc = self.config.vision
+        vc = self.vision_for(frame.shape[1], frame.shape[0])
         h, w = frame.shape[:2]
         centre = principal_point(w, h)
         ms: dict[str, float] = {}
