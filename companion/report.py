@@ -143,16 +143,7 @@ def _draw_vp(img: np.ndarray, vp: np.ndarray, colour, label: str) -> None:
     p = to_pixels(vp)
     if p is not None and 0 <= p[0] < w and 0 <= p[1] < h:
         cv2.circle(img, (int(p[0]), int(p[1])), 6, colour, 2, cv2.LINE_AA)
-        cv2.putText(
-            img,
-            label,
-            (int(p[0]) + 8, int(p[1]) - 8),
-            cv2.FONT_HERSHEY_SIMPLEX,
-            0.45,
-            colour,
-            1,
-            cv2.LINE_AA,
-        )
+        _label(img, label, (int(p[0]) + 8, int(p[1]) - 8), colour)
         return
     d = (vp[:2] - vp[2] * c) * (1 if vp[2] >= 0 else -1)
     if np.linalg.norm(d) < 1e-12:
@@ -170,16 +161,29 @@ def _draw_vp(img: np.ndarray, vp: np.ndarray, colour, label: str) -> None:
         cv2.LINE_AA,
         tipLength=0.4,
     )
-    cv2.putText(
-        img,
-        label,
-        (int(tail[0]) - 8, int(tail[1]) - 6),
-        cv2.FONT_HERSHEY_SIMPLEX,
-        0.45,
-        colour,
-        1,
-        cv2.LINE_AA,
-    )
+    _label(img, label, (int(tail[0]) - 8, int(tail[1]) - 6), colour)
+
+
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+_BAND = (32, 32, 32)
+
+
+def _label(img: np.ndarray, text: str, org: tuple[int, int], colour, scale: float = 0.45
+           ) -> int:
+    """``text`` in ``colour`` on a solid dark box (legible on any background), its
+    baseline at ``org``; returns the x just past it."""
+    (tw, th), base = cv2.getTextSize(text, _FONT, scale, 1)
+    x, y = org
+    cv2.rectangle(img, (x - 2, y - th - 3), (x + tw + 2, y + base), _BAND, cv2.FILLED)
+    cv2.putText(img, text, (x, y), _FONT, scale, colour, 1, cv2.LINE_AA)
+    return x + tw + 4
+
+
+LEGEND = (("V1", _LABEL_COLOURS[V1]), ("V2", _LABEL_COLOURS[V2]),
+          ("V3 vertical", _LABEL_COLOURS[V3]), ("obstacle: legs, corners, O1 O2", _OBSTACLE),
+          ("unassigned", _LABEL_COLOURS[NONE]), ("η arrow", (0, 0, 255)))
+"""What each colour of :func:`annotate` is: segments pointing at V1, V2, V3; the obstacle's
+legs, corner points and OVPs; segments of no VP; the arrow turned by η."""
 
 
 def annotate(frame: np.ndarray, est: Estimate, cmd: TurnCommand | None = None) -> np.ndarray:
@@ -206,14 +210,29 @@ def annotate(frame: np.ndarray, est: Estimate, cmd: TurnCommand | None = None) -
         for k in (0, 1):
             _draw_vp(img, ob.ovps[k], _OBSTACLE, f"O{k + 1}")
     # η arrow from the centre: straight up for 0, turned by η.
-    c = (w // 2, h - 30)
+    c = (w // 2, h - 40)
     if est.eta_deg is not None:
         a = math.radians(est.eta_deg)
         tip = (int(c[0] + 60 * math.sin(a)), int(c[1] - 60 * math.cos(a)))
         cv2.arrowedLine(img, c, tip, (0, 0, 255), 3, cv2.LINE_AA, tipLength=0.25)
+    # Hershey fonts have no η or °: spelled out.
     text = "eta: none" if est.eta_deg is None else f"eta {est.eta_deg:+.1f} deg"
+    if est.eta_tracked_deg is not None:
+        text += f"  tracked {est.eta_tracked_deg:+.1f} deg"
     if cmd is not None:
         text += f"  {cmd.action}  {cmd.yaw_rate_deg_s:+.1f} deg/s"
-    cv2.putText(img, text, (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 3, cv2.LINE_AA)
-    cv2.putText(img, text, (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
+    scale = 0.5 if w >= 480 else 0.38
+    band = int(26 * scale / 0.5)
+    cv2.rectangle(img, (0, 0), (w, band), _BAND, cv2.FILLED)
+    cv2.putText(img, text, (8, int(band * 0.72)), _FONT, scale, (255, 255, 255), 1, cv2.LINE_AA)
+    # The legend along the bottom, each name in its colour.
+    small = scale * 0.8
+    cv2.rectangle(img, (0, h - band + 4), (w, h), _BAND, cv2.FILLED)
+    x = 6
+    for name, colour in LEGEND:
+        name = name.replace("η", "eta")
+        if x + cv2.getTextSize(name, _FONT, small, 1)[0][0] > w:
+            break
+        cv2.putText(img, name, (x, h - 6), _FONT, small, colour, 1, cv2.LINE_AA)
+        x += cv2.getTextSize(name, _FONT, small, 1)[0][0] + 12
     return img

@@ -1,0 +1,68 @@
+"""The second renderer (sitl/pathtraced.py, Mitsuba 3) and the pipeline on its pictures."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from companion.config import Config
+from companion.vision.pipeline import Pipeline
+from sitl.pathtraced import (
+    Furniture,
+    Look,
+    Room3D,
+    _undistort_map,
+    distort_points,
+    random_room,
+    render,
+)
+from sitl.sample import sample_scene
+
+
+def _room(kind="box", **look):
+    scene, cam = sample_scene()
+    piece = Furniture(kind, 4.4, 0.3, 30.0, 1.2, 0.7, 1.0, (0.3, 0.35, 0.55), "paint")
+    return Room3D(scene.room, (piece,), Look(spp=8, seed=3, **look)), replace(
+        cam, width=320, height=240)
+
+
+def test_a_rotated_box_is_found_in_a_path_traced_room():
+    r3, cam = _room(window_power=0.0, distortion_k1=0.0)
+    image, truth = render(r3, cam)
+    assert image.shape == (240, 320, 3) and image.dtype == np.uint8
+    assert image.std() > 10  # a picture, not a flat field
+    target = truth.obstacles[0]
+    assert target.non_manhattan and target.detectable
+    cfg = Config()
+    est = Pipeline(replace(cfg, camera=replace(cfg.camera, focal_px=cam.focal_px)))(image)
+    assert est.eta_deg == pytest.approx(target.eta_deg, abs=1.5)
+
+
+@pytest.mark.parametrize("kind", ["table", "cabinet", "sofa"])
+def test_furniture_that_is_not_a_box_renders_and_has_truth(kind):
+    r3, cam = _room(kind)
+    image, truth = render(r3, cam)
+    assert truth.obstacles[0].non_manhattan
+    assert truth.obstacles[0].eta_deg == pytest.approx(35.0, abs=0.01)  # 30° − (−5°), level
+    # The furniture darkens the floor and wall where it stands: its parts were drawn.
+    empty, _ = render(replace(r3, furniture=()), cam)
+    assert np.abs(image.astype(int) - empty.astype(int)).mean() > 2.0
+
+
+def test_lens_distortion_moves_corners_with_the_pixels():
+    _, cam = _room()
+    k1 = 0.04
+    mx, my = _undistort_map(cam, k1)
+    # distort_points inverts the map: the output pixel that reads a point reads it back.
+    for v, u in ((10, 15), (200, 300), (120, 160), (5, 310)):
+        d = distort_points(cam, k1, np.array([[mx[v, u], my[v, u]]]))[0]
+        assert d == pytest.approx([u, v], abs=1e-3)
+
+
+def test_random_rooms_are_reproducible_and_varied():
+    a = random_room(np.random.default_rng([5, 1]), 320, 240)
+    b = random_room(np.random.default_rng([5, 1]), 320, 240)
+    assert a == b
+    kinds = {f.kind for i in range(12)
+             for f in random_room(np.random.default_rng([5, i]), 320, 240)[0].furniture}
+    assert {"table", "cabinet", "sofa", "box"} <= kinds
