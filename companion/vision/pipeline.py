@@ -51,6 +51,10 @@ REFERENCE_DIAGONAL_PX = 800.0
 FOCAL_MEMORY = 31
 """frames of focal-length estimates the running estimate is the median of"""
 
+SETTLED_TOL = 0.15
+"""a frame searched with the running estimate alone keeps its layout when the focal length
+it implies is within this share of the estimate; else it calibrates itself"""
+
 FOCAL_WARMUP = 5
 """estimates gathered by full per-frame self-calibration before the running estimate is
 trusted as the one guess a frame is searched with"""
@@ -201,15 +205,20 @@ class Pipeline:
             f = _orthogonal_focal(layout, centre)
             return f if f is not None and FOCAL_RANGE[0] * w <= f <= FOCAL_RANGE[1] * w else None
 
+        guesses = [g * w for g in SELF_CALIBRATION_GUESSES]
         if self.running_focal.settled:
-            layout = detect_layout_vps(segments, w, h, self.running_focal.focal_px, vp)
+            f_run = self.running_focal.focal_px
+            layout = detect_layout_vps(segments, w, h, f_run, vp)
             f = estimate(layout)
-            if f is not None:
+            if f is not None and abs(f - f_run) <= SETTLED_TOL * f_run:
                 self.running_focal = self.running_focal.add(f)
-            return layout, "estimated"
+                return layout, "estimated"
+            # This frame disagrees with the video's focal length, or shows no V1–V2 pair
+            # under it: it calibrates itself, starting from the running estimate.
+            guesses.insert(0, f_run)
 
         first = unconfirmed = None
-        for guess in (g * w for g in SELF_CALIBRATION_GUESSES):
+        for guess in guesses:
             layout = detect_layout_vps(segments, w, h, guess, vp)
             first = first or layout
             f = estimate(layout)
