@@ -50,6 +50,9 @@ class CameraConfig:
     height: int = field(default=480, metadata=_range(16, 8192))
     fps: float = field(default=30.0, metadata=_range(1.0, 240.0))
     fourcc: str = "MJPG"
+    height_m: float | None = field(default=None, metadata=_range(0.05, 100.0))
+    """the camera's height above the floor for range in a dry run (in flight: the
+    autopilot's altitude); None: no range without an autopilot"""
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ LOG_KEYS = (
     "layout_vps",
     "focal_px",
     "eta_tracked_deg",
+    "range_m",
 )
 
 # BGR colours: V1 red, V2 green, V3 blue, obstacle legs yellow, unassigned grey.
@@ -80,6 +81,7 @@ def log_record(frame: int, t: float, est: Estimate, cmd: TurnCommand, latency_ms
         "layout_vps": layout_vps_record(est),
         "focal_px": round(float(est.focal_px), 3),
         "eta_tracked_deg": _round(est.eta_tracked_deg),
+        "range_m": _round(est.range_m),
     }
 
 

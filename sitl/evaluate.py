@@ -36,7 +36,6 @@ version, the seed, the index and the camera.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -97,6 +96,12 @@ class SceneResult:
     eta_est_deg: float | None
     corner_err_pct: float | None
     latency_ms: float
+    range_est_m: float | None = None
+    range_true_m: float | None = None  # the true floor corner nearest the measured one
+
+
+RANGE_BANDS = ((1.0, 3.0), (3.0, 6.0))
+"""distance bands (metres) of the range figures"""
 
 
 @dataclass(frozen=True)
@@ -141,16 +146,30 @@ class EvalReport:
             "eta_err_p90_deg": float(np.percentile(err, 90)) if len(err) else None,
             "corner_err_pct": float(np.mean(corners)) if corners else None,
             "latency_ms_median": float(np.median(lat)) if len(lat) else None,
+            **self.range_figures(),
         }
+
+    def range_figures(self) -> dict[str, float | int | None]:
+        """Relative error of ``range_m`` against the true floor contact, by distance band
+        (:data:`RANGE_BANDS`): median, p90, and how many measured ranges were more than
+        20 % too far (the dangerous direction)."""
+        out: dict[str, float | int | None] = {}
+        pairs = [(r.range_est_m, r.range_true_m) for r in self.results
+                 if r.range_est_m is not None and r.range_true_m is not None]
+        for lo, hi in RANGE_BANDS:
+            rel = np.array([(e - t) / t for e, t in pairs if lo <= t < hi])
+            key = f"range_{lo:g}_{hi:g}m"
+            out[f"{key}_n"] = len(rel)
+            out[f"{key}_rel_err_median"] = float(np.median(np.abs(rel))) if len(rel) else None
+            out[f"{key}_rel_err_p90"] = (float(np.percentile(np.abs(rel), 90))
+                                         if len(rel) else None)
+            out[f"{key}_too_far"] = int(np.sum(rel > 0.2))
+        return out
 
 
 def _cache_dir() -> Path:
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "companion" / "renders"
-
-
-def _truth_from_json(d: dict) -> SceneTruth:
-    return SceneTruth(**{**d, "obstacles": [ObstacleTruth(**o) for o in d["obstacles"]]})
 
 
 def draw_scene(renderer: str, seed: int, index: int, obstacle_share: float = 0.7,
@@ -169,22 +188,19 @@ def draw_scene(renderer: str, seed: int, index: int, obstacle_share: float = 0.7
 
     fov = "any" if hfov_deg is None else f"{hfov_deg:g}"
     path = (_cache_dir() / f"pathtraced-{pathtraced.VERSION}" / f"{width}x{height}-{fov}"
-            / f"{seed}-{index}-{obstacle_share:g}")
-    png, js = path.with_suffix(".png"), path.with_suffix(".json")
-    if png.exists() and js.exists():
-        image = cv2.imread(str(png), cv2.IMREAD_COLOR)
-        if image is not None:
-            return image, _truth_from_json(json.loads(js.read_text()))
+            / f"{seed}-{index}-share{obstacle_share:g}.png")
     # Small frames get more samples per pixel: the same light per unit of the scene.
     spp = 16 if width * height >= 640 * 480 else 32
     r3, cam = pathtraced.random_room(rng, width, height, obstacle=has_obstacle,
                                      hfov_deg=hfov_deg, spp=spp)
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR) if path.exists() else None
+    if image is not None:  # the truth is cheap and always computed afresh
+        return image, pathtraced.truth(r3, cam)
     image, truth = pathtraced.render(r3, cam)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.png")
     cv2.imwrite(str(tmp), image)
-    js.write_text(json.dumps(truth.to_json()))
-    os.replace(tmp, png)
+    os.replace(tmp, path)
     return image, truth
 
 
@@ -218,16 +234,20 @@ def evaluate_scene(
     cfg = config or Config()
     if assume_focal:
         cfg = replace(cfg, camera=replace(cfg.camera, focal_px=truth.focal_px))
-    est = Pipeline(cfg)(image)
+    est = Pipeline(cfg)(image, camera_height_m=truth.camera_height_m)
     targets = [o for o in truth.obstacles if o.non_manhattan]
     detectable = [o for o in targets if o.detectable]
     target = (detectable or targets or [None])[0]
-    corner_err = None
+    corner_err = range_true = None
     if targets and est.obstacles:
         matched, d = _match(est.obstacles[0].corners_px, truth)
         if matched is not None:
             target = matched
             corner_err = d / math.hypot(width, height) * 100.0
+            if est.contact is not None and matched.floor_corners:
+                fc = np.array(matched.floor_corners)
+                near = np.argmin(np.hypot(*(fc[:, :2] - np.array(est.contact.pixel)).T))
+                range_true = float(fc[near, 2])
     return SceneResult(
         index=index,
         has_obstacle=target is not None,
@@ -236,6 +256,8 @@ def evaluate_scene(
         eta_est_deg=est.eta_deg,
         corner_err_pct=corner_err,
         latency_ms=est.latency_ms,
+        range_est_m=est.range_m,
+        range_true_m=range_true,
     )
 
 
@@ -365,6 +387,21 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]]) -> l
                 f"{'n/a' if f['corner_err_pct'] is None else format(f['corner_err_pct'], '.2f'):>8}"
                 f"   >={100 * t['detection_rate']:.0f}/<={t['eta_err_median_deg']:g}/"
                 f"<={t['eta_err_p90_deg']:g}" + (f"  MISSED {','.join(miss)}" if miss else "  ok"))
+    lines.append("range to the obstacle's floor contact (camera height given), relative error "
+                 "median / p90, measured, too far by > 20 %:")
+    for label, *_ in CAMERAS:
+        for split, by_camera in reports.items():
+            f = by_camera[label].figures()
+            parts = []
+            for lo, hi in RANGE_BANDS:
+                key = f"range_{lo:g}_{hi:g}m"
+                if f[f"{key}_n"]:
+                    parts.append(f"{lo:g}–{hi:g} m {100 * f[key + '_rel_err_median']:.1f} / "
+                                 f"{100 * f[key + '_rel_err_p90']:.1f} %, n {f[key + '_n']}, "
+                                 f"too far {f[key + '_too_far']}")
+                else:
+                    parts.append(f"{lo:g}–{hi:g} m n 0")
+            lines.append(f"  {label:<14} {split:<5} " + "; ".join(parts))
     return lines
 
 

@@ -52,7 +52,8 @@ from sitl.scene import (
     scene_truth,
 )
 
-__all__ = ["Furniture", "Look", "Room3D", "random_room", "render", "available", "KINDS", "VERSION"]
+__all__ = ["Furniture", "Look", "Room3D", "random_room", "render", "truth", "available", "KINDS",
+           "VERSION"]
 
 VERSION = 1
 """bumped whenever a change alters the pictures: cached renders of another version are not reused"""
@@ -485,20 +486,28 @@ def develop(linear_rgb: np.ndarray, cam: Camera, look: Look) -> np.ndarray:
     return np.clip(np.rint(img), 0, 255).astype(np.uint8)[..., ::-1].copy()
 
 
+def truth(r3: Room3D, cam: Camera) -> SceneTruth:
+    """The exact truth of ``r3`` seen by ``cam``: that of its bounding boxes
+    (:func:`sitl.scene.scene_truth`), image points moved by the lens distortion."""
+    t = scene_truth(r3.truth_scene(), cam)
+    k1 = r3.look.distortion_k1
+    if not k1:
+        return t
+    moved = []
+    for o in t.obstacles:
+        c = distort_points(cam, k1, np.array(o.corners_px).reshape(-1, 2))
+        fc = np.array(o.floor_corners).reshape(-1, 3)
+        fc[:, :2] = distort_points(cam, k1, fc[:, :2])
+        moved.append(replace(o, corners_px=c.tolist(), floor_corners=fc.tolist()))
+    return replace(t, obstacles=moved)
+
+
 def render(r3: Room3D, cam: Camera) -> tuple[np.ndarray, SceneTruth]:
     """Path-trace ``r3`` as ``cam`` sees it: (H×W×3 uint8 BGR, :class:`SceneTruth`)."""
     mi = _mi()
     scene = mi.load_dict(_scene_dict(mi, r3, cam))
     linear = np.array(mi.render(scene, spp=r3.look.spp, seed=r3.look.seed))
-    image = develop(linear[..., :3], cam, r3.look)
-    truth = scene_truth(r3.truth_scene(), cam)
-    if r3.look.distortion_k1:
-        moved = []
-        for o in truth.obstacles:
-            c = distort_points(cam, r3.look.distortion_k1, np.array(o.corners_px).reshape(-1, 2))
-            moved.append(replace(o, corners_px=c.tolist()))
-        truth = replace(truth, obstacles=moved)
-    return image, truth
+    return develop(linear[..., :3], cam, r3.look), truth(r3, cam)
 
 
 # --------------------------------------------------------------------------- random rooms

@@ -204,6 +204,9 @@ class ObstacleTruth:
     phi_deg: float
     corners_px: list[list[float]]  # visible corner projections
     detectable: bool
+    floor_corners: list[list[float]] = field(default_factory=list)
+    """visible bottom corners: [x, y, range_m], range the horizontal distance from the
+    camera, metres (the truth of :mod:`companion.vision.ranging`)"""
 
 
 @dataclass(frozen=True)
@@ -213,6 +216,7 @@ class SceneTruth:
     height: int
     layout_vps: list[list[float]]  # room north, east, down axes
     obstacles: list[ObstacleTruth]
+    camera_height_m: float = 0.0
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -498,6 +502,9 @@ def _box_truth(scene: Scene, cam: Camera, k: int, min_edge_px: float) -> Obstacl
         phi_deg=phi,
         corners_px=uv[vis].tolist(),
         detectable=detectable,
+        floor_corners=[[float(uv[i][0]), float(uv[i][1]),
+                        float(math.hypot(*(bottom[i][:2] - cam.position[:2])))]
+                       for i in range(4) if vis[i]],
     )
 
 
@@ -510,6 +517,7 @@ def scene_truth(scene: Scene, cam: Camera, min_edge_px: float = 15.0) -> SceneTr
         height=cam.height,
         layout_vps=[cam.vp_of(a).tolist() for a in axes],
         obstacles=[_box_truth(scene, cam, k, min_edge_px) for k in range(len(scene.boxes))],
+        camera_height_m=cam.height_m,
     )
 
 

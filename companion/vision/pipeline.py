@@ -27,6 +27,7 @@ from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
+from companion.vision.ranging import FloorContact, obstacle_contact
 from companion.vision.tracking import Track, update_track
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
@@ -118,6 +119,9 @@ class Estimate:
     focal length, else the video's running estimate of it, else half the width).
     ``eta_tracked_deg``: η of the obstacle tracked across this video's frames
     (:mod:`~companion.vision.tracking`), None without a confirmed track.
+    ``contact``: the primary obstacle's nearest floor contact, range and bearing
+    (:mod:`~companion.vision.ranging`), None without the camera height or a vertical
+    edge whose foot is seen.
     """
 
     eta_deg: float | None
@@ -136,6 +140,12 @@ class Estimate:
     focal_source: str = "given"  # given | estimated (from V1 ⟂ V2) | assumed (width / 2)
     stage_ms: dict[str, float] = field(default_factory=dict)
     eta_tracked_deg: float | None = None
+    contact: FloorContact | None = None
+
+    @property
+    def range_m(self) -> float | None:
+        """Horizontal distance to the primary obstacle's floor contact, metres."""
+        return None if self.contact is None else self.contact.range_m
 
     @property
     def latency_ms(self) -> float:
@@ -278,8 +288,10 @@ class Pipeline:
                 obstacles=replace(vc.obstacles, min_edge_px=vc.obstacles.min_edge_px * s))
         return self._vision[key]
 
-    def __call__(self, frame: np.ndarray) -> Estimate:
-        """Run every stage on a BGR or grey ``frame`` (H×W[×3] uint8)."""
+    def __call__(self, frame: np.ndarray, camera_height_m: float | None = None) -> Estimate:
+        """Run every stage on a BGR or grey ``frame`` (H×W[×3] uint8). With the camera's
+        height above the floor (``camera_height_m``, else ``camera.height_m``) the
+        primary obstacle's range is measured too."""
         vc = self.vision_for(frame.shape[1], frame.shape[0])
         h, w = frame.shape[:2]
         centre = principal_point(w, h)
@@ -333,6 +345,11 @@ class Pipeline:
             eta, phi, m = hd.eta_deg, hd.phi_deg, hd.m_px
         self.track, eta_tracked = update_track(self.track, eta,
                                                _room_eta(layout, centre, depth))
+        height = camera_height_m or self.config.camera.height_m
+        contact = None
+        if obstacles and height and layout.observed[V3]:
+            contact = obstacle_contact(obstacles[0].corners_px, layout.vps[V3],
+                                       layout.focal_px, centre, height)
         ms["heading"] = (time.perf_counter() - t4) * 1e3
 
         return Estimate(
@@ -352,4 +369,5 @@ class Pipeline:
             depth_px=depth,
             stage_ms=ms,
             eta_tracked_deg=eta_tracked,
+            contact=contact,
         )

@@ -1,0 +1,108 @@
+"""How far an obstacle is: range from the floor plane (not in the paper).
+
+η says which way an obstacle's face points, not how far away it is. The floor is a plane
+the layout already fixes: its normal is the vertical direction, ``d = K⁻¹ V3`` (so pitch
+and roll are taken into account), and the camera stands ``h`` metres above it. A pixel
+``p`` whose ray ``r = K⁻¹ [p, 1]`` goes below the horizon meets the floor at
+``X = h · r / (r · d)``; the horizontal distance and bearing of ``X`` are the range and
+bearing of whatever stands on the floor there.
+
+An obstacle's floor contact is the lower corner of one of its vertical edges: of two of
+its corners on one line through V3, the one farther down. A top corner alone is never
+used, since its ray meets the floor beyond the obstacle (a range too far, the dangerous
+direction). Pure functions over arrays; distances in metres, angles in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.vision.geometry import direction_of
+
+__all__ = ["FloorContact", "floor_point", "obstacle_contact", "down_direction"]
+
+VERTICAL_EDGE_TOL_DEG = 2.0
+"""two corners are on one vertical edge when their line points at V3 within this"""
+
+MIN_DEPRESSION_DEG = 1.0
+"""a ray less than this below the horizon meets the floor too far away to trust"""
+
+
+@dataclass(frozen=True)
+class FloorContact:
+    """Where something meets the floor: ``range_m`` horizontal distance from the camera,
+    ``bearing_deg`` right of the camera's forward direction (projected on the floor),
+    ``pixel`` the image point (x, y)."""
+
+    range_m: float
+    bearing_deg: float
+    pixel: tuple[float, float]
+
+
+def down_direction(v3: np.ndarray, focal_px: float, centre: np.ndarray) -> np.ndarray:
+    """Unit vector of the world's down direction in camera coordinates (x right, y down,
+    z forward), from the vertical VP ``v3`` (homogeneous pixels)."""
+    d = direction_of(np.asarray(v3, dtype=float), focal_px, centre).reshape(3)
+    return d if d[1] >= 0 else -d  # the camera is upright: down is down in the image
+
+
+def floor_point(pixel, down: np.ndarray, focal_px: float, centre: np.ndarray,
+                camera_height_m: float) -> FloorContact | None:
+    """The floor point seen at ``pixel`` (x, y), None above or too near the horizon.
+
+    Inputs: ``down`` from :func:`down_direction`; ``focal_px``, ``centre`` the camera;
+    ``camera_height_m`` above the floor.
+    """
+    x, y = float(pixel[0]), float(pixel[1])
+    r = np.array([(x - centre[0]) / focal_px, (y - centre[1]) / focal_px, 1.0])
+    r /= np.linalg.norm(r)
+    s = float(r @ down)  # sine of the ray's depression below the horizon
+    if s < math.sin(math.radians(MIN_DEPRESSION_DEG)):
+        return None
+    p = camera_height_m * r / s
+    horizontal = p - (p @ down) * down
+    fwd = np.array([0.0, 0.0, 1.0]) - down[2] * down
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(down, fwd)  # camera x, levelled: down × forward points right
+    bearing = math.degrees(math.atan2(float(horizontal @ right), float(horizontal @ fwd)))
+    return FloorContact(float(np.linalg.norm(horizontal)), bearing, (x, y))
+
+
+def obstacle_contact(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
+                     centre: np.ndarray, camera_height_m: float) -> FloorContact | None:
+    """The nearest floor contact of an obstacle whose corner projections are
+    ``corners_px`` (K×2): the lower corners of its vertical edges, seen on the floor.
+    None when no two corners share a vertical edge, or none is below the horizon."""
+    pts = np.atleast_2d(np.asarray(corners_px, dtype=float))
+    down = down_direction(v3, focal_px, centre)
+    v = np.asarray(v3, dtype=float)
+    best: FloorContact | None = None
+    tol = math.sin(math.radians(VERTICAL_EDGE_TOL_DEG))
+    for i in range(len(pts)):
+        for j in range(len(pts)):
+            if i == j:
+                continue
+            edge = pts[i] - pts[j]
+            n = float(np.hypot(*edge))
+            if n < 1.0:
+                continue
+            # Direction toward V3 from j (V3 may be at infinity: w = 0).
+            to_v3 = v[:2] - v[2] * pts[j]
+            m = float(np.hypot(*to_v3))
+            if m < 1e-12:
+                continue
+            to_v3 = to_v3 / m * (1.0 if v[2] >= 0 else -1.0)
+            if abs(edge[0] * to_v3[1] - edge[1] * to_v3[0]) / n > tol:
+                continue  # not on one vertical line
+            # i is the lower corner when it lies farther down (toward the floor) than j.
+            di = direction_of(np.array([pts[i][0], pts[i][1], 1.0]), focal_px, centre)
+            dj = direction_of(np.array([pts[j][0], pts[j][1], 1.0]), focal_px, centre)
+            if float(di.reshape(3) @ down) <= float(dj.reshape(3) @ down):
+                continue
+            c = floor_point(pts[i], down, focal_px, centre, camera_height_m)
+            if c is not None and (best is None or c.range_m < best.range_m):
+                best = c
+    return best

@@ -1,0 +1,70 @@
+"""Range from the floor plane (companion/vision/ranging.py) and in the pipeline."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from companion.vision.pipeline import Pipeline
+from companion.vision.ranging import down_direction, floor_point, obstacle_contact
+from sitl.sample import sample_scene
+from sitl.scene import render
+
+CENTRE = np.array([319.5, 239.5])
+F = 320.0
+STRAIGHT_DOWN = np.array([0.0, 1.0, 0.0])  # V3 of a level camera: at infinity, downward
+
+
+def test_a_level_camera_sees_the_floor_at_h_f_over_the_row_offset():
+    down = down_direction(STRAIGHT_DOWN, F, CENTRE)
+    c = floor_point((319.5, 239.5 + 80.0), down, F, CENTRE, 1.2)
+    assert c.range_m == pytest.approx(1.2 * F / 80.0)
+    assert c.bearing_deg == pytest.approx(0.0, abs=1e-9)
+    right = floor_point((319.5 + 80.0, 239.5 + 80.0), down, F, CENTRE, 1.2)
+    assert right.bearing_deg == pytest.approx(math.degrees(math.atan(80.0 / F)))
+    assert floor_point((319.5, 200.0), down, F, CENTRE, 1.2) is None  # above the horizon
+
+
+def test_a_pitched_camera_uses_v3_not_the_image_rows():
+    # Pitched 10° down: the horizon is above the centre and V3 is finite below.
+    pitch = math.radians(10.0)
+    v3 = np.array([CENTRE[0], CENTRE[1] + F / math.tan(pitch), 1.0])
+    down = down_direction(v3, F, CENTRE)
+    c = floor_point(CENTRE, down, F, CENTRE, 1.0)  # the optical axis
+    assert c.range_m == pytest.approx(1.0 / math.tan(pitch))
+
+
+def test_a_corner_with_no_partner_below_or_above_gives_no_range():
+    assert obstacle_contact(np.array([[300.0, 300.0]]), STRAIGHT_DOWN, F, CENTRE, 1.2) is None
+    # Two corners side by side are not a vertical edge either.
+    pts = np.array([[300.0, 300.0], [360.0, 300.0]])
+    assert obstacle_contact(pts, STRAIGHT_DOWN, F, CENTRE, 1.2) is None
+
+
+def test_the_lower_corner_of_a_vertical_edge_is_the_floor_contact():
+    pts = np.array([[300.0, 200.0], [300.0, 319.5]])  # top, bottom of one edge
+    c = obstacle_contact(pts, STRAIGHT_DOWN, F, CENTRE, 1.2)
+    assert c.pixel == (300.0, 319.5)
+    assert c.range_m == pytest.approx(1.2 * F / 80.0 * math.hypot(1, 19.5 / F), rel=1e-6)
+
+
+@pytest.mark.parametrize("pitch, roll", [(0.0, 0.0), (4.0, 0.0), (-3.0, 3.0)])
+def test_the_pipeline_measures_the_range_of_a_rendered_box(pitch, roll):
+    scene, cam = sample_scene()
+    cam = replace(cam, pitch_deg=pitch, roll_deg=roll)
+    image, truth = render(scene, cam)
+    est = Pipeline()(image, camera_height_m=cam.height_m)
+    assert est.range_m is not None
+    nearest = min(truth.obstacles[0].floor_corners,
+                  key=lambda c: math.hypot(c[0] - est.contact.pixel[0],
+                                           c[1] - est.contact.pixel[1]))
+    assert truth.obstacles[0].floor_corners
+    assert est.range_m == pytest.approx(nearest[2], rel=0.05)
+
+
+def test_no_height_no_range():
+    scene, cam = sample_scene()
+    image, _ = render(scene, cam)
+    est = Pipeline()(image)
+    assert est.eta_deg is not None and est.range_m is None
