@@ -87,6 +87,9 @@ class PolicyConfig:
 class MavlinkConfig:
     url: str = "udpin://127.0.0.1:14540"
     connect_timeout_s: float = field(default=10.0, metadata=_range(0.1, 3600.0))
+    obstacle_distance_hz: float = field(default=10.0, metadata=_range(0.0, 50.0))
+    """OBSTACLE_DISTANCE to PX4's Collision Prevention while connected (0: never)"""
+    obstacle_distance_increment_deg: float = field(default=5.0, metadata=_range(1.0, 45.0))
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ import numpy as np
 
 from companion.capture import LatestFrame, is_camera, open_source
 from companion.config import Config
+from companion.control.obstacle_distance import from_estimate
 from companion.control.offboard import AutopilotNotFound, OffboardController
 from companion.control.policy import TurnHistory, confirm_reversal, decide_turn
 from companion.notify import notify
@@ -87,10 +88,12 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
             if frames.ended.is_set():
                 return
             continue
-        est = pipeline(frame.image)
+        est = pipeline(frame.image, camera_height_m=controller.camera_height_m())
         cmd, history = confirm_reversal(
             decide_turn(est.eta_deg, config.policy, est.scene_understood), history)
-        controller.submit(cmd, est.eta_deg, t_s=frame.captured_s)
+        controller.submit(cmd, est.eta_deg, t_s=frame.captured_s,
+                          obstacle_distance=from_estimate(
+                              est, config.mavlink.obstacle_distance_increment_deg))
         now = time.monotonic()
         health.decisions += 1
         health.last_decision_s = now

@@ -210,6 +210,7 @@ class MockAutopilot:
         self._last_setpoint: SetpointRecord | None = None
         self.setpoints: list[SetpointRecord] = []
         self.named_values: list[tuple[float, str, float]] = []
+        self.obstacle_distances: list[tuple[float, dict]] = []  # (t, OBSTACLE_DISTANCE)
         self.statustexts: list[tuple[float, int, str]] = []
         self.mode_changes: list[tuple[float, str, str]] = []  # (t, mode name, why)
         self.acks: list[tuple[float, int, int]] = []  # (t, command, result)
@@ -554,6 +555,8 @@ class MockAutopilot:
             self._on_param(msg, addr)
         elif kind == "NAMED_VALUE_FLOAT":
             self.named_values.append((time.monotonic(), msg.name, float(msg.value)))
+        elif kind == "OBSTACLE_DISTANCE":
+            self.obstacle_distances.append((time.monotonic(), msg.to_dict()))
         elif kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
             self.statustexts.append((time.monotonic(), msg.severity, text.rstrip("\0")))

@@ -31,7 +31,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from companion.config import Config
+from companion.control import obstacle_distance as od
 from companion.control import supervisor as sv
+from companion.control.obstacle_distance import ObstacleDistance
 from companion.control.policy import TurnCommand
 
 log = logging.getLogger("companion.offboard")
@@ -89,6 +91,7 @@ class OffboardController:
         self.clock = clock
         self._lock = threading.Lock()
         self._decision: sv.Decision | None = None
+        self._obstacle_distance: tuple[float, ObstacleDistance | None] | None = None
         self._enable_requested = False
         self.state = sv.initial_state(config.offboard)
         self.events: list[str] = []  # every state-change message, in order (also logged)
@@ -102,18 +105,28 @@ class OffboardController:
 
     # ------------------------------------------------------------------ any thread
     def submit(self, command: TurnCommand, eta_deg: float | None = None,
-               t_s: float | None = None) -> None:
+               t_s: float | None = None,
+               obstacle_distance: ObstacleDistance | None = None) -> None:
         """Hand over the newest decision (``t_s``: when its frame was taken, on ``clock``).
-        It carries the heading the autopilot reports now, the frame's a few ms ago."""
+        It carries the heading the autopilot reports now, the frame's a few ms ago, and
+        the frame's OBSTACLE_DISTANCE sectors, if it measured any."""
         pose = self.pose
         decision = sv.Decision(self.clock() if t_s is None else t_s, command, eta_deg,
                                None if pose is None else pose.yaw_deg)
         with self._lock:
             self._decision = decision
+            self._obstacle_distance = (decision.t_s, obstacle_distance)
             loop, wake = self._loop, self._wake
         if loop is not None and wake is not None:
             with contextlib.suppress(RuntimeError):  # the loop has just closed
                 loop.call_soon_threadsafe(wake.set)
+
+    def camera_height_m(self) -> float | None:
+        """The camera's height above the floor as the autopilot reports it: the altitude
+        above its local origin (where its estimator started, on the floor indoors), None
+        before telemetry or on the ground."""
+        pose = self.pose
+        return -pose.down_m if pose is not None and -pose.down_m > 0.05 else None
 
     def enable(self) -> None:
         """Allow offboard again after a release (pilot override, stall, link loss)."""
@@ -298,6 +311,9 @@ class _Session:
         period_s = 1.0 / cfg.offboard.setpoint_rate_hz
         report_every_s = 1.0 / cfg.offboard.eta_report_hz if cfg.offboard.eta_report_hz else 0
         next_report_s = 0.0
+        od_every_s = (1.0 / cfg.mavlink.obstacle_distance_hz
+                      if cfg.mavlink.obstacle_distance_hz else 0.0)
+        next_od_s, last_od = 0.0, None
         self.deadman.start()
         wake = ctl._wake or asyncio.Event()
         relay = asyncio.ensure_future(stop.wait())
@@ -340,6 +356,19 @@ class _Session:
                 await self._send("NAMED_VALUE_FLOAT", {
                     "time_boot_ms": int(now * 1000) & 0xFFFFFFFF, "name": "eta_deg",
                     "value": round(float(decision.eta_deg), 3)})
+            wall = time.monotonic()
+            if od_every_s and vehicle.connected and wall >= next_od_s:
+                # On a fixed schedule (not "a period after the last one"), so that the
+                # 20 Hz ticks make the rate exactly; after a stall, no burst.
+                next_od_s = max(next_od_s + od_every_s, wall - od_every_s / 2)
+                with ctl._lock:
+                    measured = ctl._obstacle_distance
+                fresh = (measured is not None and measured[1] is not None
+                         and now - measured[0] <= cfg.offboard.stale_after_s)
+                last_od = measured[1] if fresh else od.unknown(
+                    last_od, cfg.mavlink.obstacle_distance_increment_deg)
+                await self._send("OBSTACLE_DISTANCE",
+                                 last_od.mavlink_fields(int(time.time() * 1e6)))
             # Ticks at setpoint_rate_hz, plus one at once for every new decision.
             wall = time.monotonic()
             if wall >= next_tick:
@@ -397,6 +426,7 @@ class _Session:
                                         "id": 0, "chunk_seq": 0})
 
     async def _send(self, name: str, fields: dict) -> None:
+        """One MAVLink message through MAVSDK's MavlinkDirect (fields by MAVLink name)."""
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkMessage
 
         msg = MavlinkMessage(name, COMPANION_SYSTEM_ID, COMPANION_COMPONENT_ID, 0, 0,

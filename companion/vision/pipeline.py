@@ -27,7 +27,7 @@ from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
-from companion.vision.ranging import FloorContact, obstacle_contact
+from companion.vision.ranging import FloorContact, floor_contacts
 from companion.vision.tracking import Track, update_track
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
@@ -119,9 +119,10 @@ class Estimate:
     focal length, else the video's running estimate of it, else half the width).
     ``eta_tracked_deg``: η of the obstacle tracked across this video's frames
     (:mod:`~companion.vision.tracking`), None without a confirmed track.
-    ``contact``: the primary obstacle's nearest floor contact, range and bearing
-    (:mod:`~companion.vision.ranging`), None without the camera height or a vertical
-    edge whose foot is seen.
+    ``obstacle_contacts``: per obstacle, its floor contacts (range and bearing,
+    :mod:`~companion.vision.ranging`), empty without the camera height
+    (``camera_height_m``) or a vertical edge whose foot is seen; ``contact``, ``range_m``:
+    the primary obstacle's nearest.
     """
 
     eta_deg: float | None
@@ -140,7 +141,14 @@ class Estimate:
     focal_source: str = "given"  # given | estimated (from V1 ⟂ V2) | assumed (width / 2)
     stage_ms: dict[str, float] = field(default_factory=dict)
     eta_tracked_deg: float | None = None
-    contact: FloorContact | None = None
+    obstacle_contacts: tuple[tuple[FloorContact, ...], ...] = ()
+    camera_height_m: float | None = None
+
+    @property
+    def contact(self) -> FloorContact | None:
+        """The primary obstacle's nearest floor contact, None if not measured."""
+        first = self.obstacle_contacts[0] if self.obstacle_contacts else ()
+        return min(first, key=lambda c: c.range_m) if first else None
 
     @property
     def range_m(self) -> float | None:
@@ -346,10 +354,11 @@ class Pipeline:
         self.track, eta_tracked = update_track(self.track, eta,
                                                _room_eta(layout, centre, depth))
         height = camera_height_m or self.config.camera.height_m
-        contact = None
+        contacts: tuple[tuple[FloorContact, ...], ...] = ()
         if obstacles and height and layout.observed[V3]:
-            contact = obstacle_contact(obstacles[0].corners_px, layout.vps[V3],
-                                       layout.focal_px, centre, height)
+            contacts = tuple(tuple(floor_contacts(o.corners_px, layout.vps[V3],
+                                                  layout.focal_px, centre, height))
+                             for o in obstacles)
         ms["heading"] = (time.perf_counter() - t4) * 1e3
 
         return Estimate(
@@ -369,5 +378,6 @@ class Pipeline:
             depth_px=depth,
             stage_ms=ms,
             eta_tracked_deg=eta_tracked,
-            contact=contact,
+            obstacle_contacts=contacts,
+            camera_height_m=height or None,
         )

@@ -22,7 +22,7 @@ import numpy as np
 
 from companion.vision.geometry import direction_of
 
-__all__ = ["FloorContact", "floor_point", "obstacle_contact", "down_direction"]
+__all__ = ["FloorContact", "floor_point", "floor_contacts", "obstacle_contact", "down_direction"]
 
 VERTICAL_EDGE_TOL_DEG = 2.0
 """two corners are on one vertical edge when their line points at V3 within this"""
@@ -71,38 +71,35 @@ def floor_point(pixel, down: np.ndarray, focal_px: float, centre: np.ndarray,
     return FloorContact(float(np.linalg.norm(horizontal)), bearing, (x, y))
 
 
-def obstacle_contact(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
-                     centre: np.ndarray, camera_height_m: float) -> FloorContact | None:
-    """The nearest floor contact of an obstacle whose corner projections are
-    ``corners_px`` (K×2): the lower corners of its vertical edges, seen on the floor.
-    None when no two corners share a vertical edge, or none is below the horizon."""
+def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
+                   centre: np.ndarray, camera_height_m: float) -> list[FloorContact]:
+    """Every floor contact of an obstacle whose corner projections are ``corners_px``
+    (K×2): the lower corner of each pair of its corners on one line through V3, seen on
+    the floor, sorted by bearing. Empty when no two corners share a vertical edge."""
     pts = np.atleast_2d(np.asarray(corners_px, dtype=float))
     down = down_direction(v3, focal_px, centre)
     v = np.asarray(v3, dtype=float)
-    best: FloorContact | None = None
     tol = math.sin(math.radians(VERTICAL_EDGE_TOL_DEG))
+    rays = [direction_of(np.array([x, y, 1.0]), focal_px, centre).reshape(3) for x, y in pts]
+    lower = set()
     for i in range(len(pts)):
         for j in range(len(pts)):
-            if i == j:
-                continue
             edge = pts[i] - pts[j]
             n = float(np.hypot(*edge))
-            if n < 1.0:
+            if i == j or n < 1.0:
                 continue
-            # Direction toward V3 from j (V3 may be at infinity: w = 0).
-            to_v3 = v[:2] - v[2] * pts[j]
+            to_v3 = v[:2] - v[2] * pts[j]  # toward V3 from corner j (V3 may be at infinity)
             m = float(np.hypot(*to_v3))
-            if m < 1e-12:
-                continue
-            to_v3 = to_v3 / m * (1.0 if v[2] >= 0 else -1.0)
-            if abs(edge[0] * to_v3[1] - edge[1] * to_v3[0]) / n > tol:
+            if m < 1e-12 or abs(edge[0] * to_v3[1] - edge[1] * to_v3[0]) / (n * m) > tol:
                 continue  # not on one vertical line
-            # i is the lower corner when it lies farther down (toward the floor) than j.
-            di = direction_of(np.array([pts[i][0], pts[i][1], 1.0]), focal_px, centre)
-            dj = direction_of(np.array([pts[j][0], pts[j][1], 1.0]), focal_px, centre)
-            if float(di.reshape(3) @ down) <= float(dj.reshape(3) @ down):
-                continue
-            c = floor_point(pts[i], down, focal_px, centre, camera_height_m)
-            if c is not None and (best is None or c.range_m < best.range_m):
-                best = c
-    return best
+            if float(rays[i] @ down) > float(rays[j] @ down):
+                lower.add(i)  # i lies farther down than j: the foot of their edge
+    out = [floor_point(pts[i], down, focal_px, centre, camera_height_m) for i in sorted(lower)]
+    return sorted((c for c in out if c is not None), key=lambda c: c.bearing_deg)
+
+
+def obstacle_contact(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
+                     centre: np.ndarray, camera_height_m: float) -> FloorContact | None:
+    """The nearest of :func:`floor_contacts`, None without any."""
+    contacts = floor_contacts(corners_px, v3, focal_px, centre, camera_height_m)
+    return min(contacts, key=lambda c: c.range_m) if contacts else None
