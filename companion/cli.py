@@ -86,6 +86,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="instead: the frozen dev and test splits of this renderer (pathtraced "
                          "needs companion[render]), focal length not given, at 640×480 90°, "
                          "640×480 60° and 320×240 90°")
+    ev.add_argument("--focal-given", action="store_true",
+                    help="with --renderer: give the pipeline the rendered focal length (a "
+                         "diagnosis; the targets are without it)")
     ev.add_argument("--clips", action="store_true",
                     help="with --renderer scene: per-frame and tracked η on yawing clips")
     ev.add_argument("--split", choices=("dev", "train", "test", "all"), default=None,
@@ -187,7 +190,8 @@ def dry_run(args) -> int:
             t0 = time.perf_counter()
             est = pipeline(frame.image)
             cmd, history = confirm_reversal(
-                decide_turn(est.eta_deg, cfg.policy, est.scene_understood), history)
+                decide_turn(est.eta_deg, cfg.policy, est.scene_understood, est.range_m),
+                history)
             latency_ms = (time.perf_counter() - t0) * 1e3
             summary.add(est, latency_ms)
             if log:
@@ -233,6 +237,9 @@ def run_eval(args) -> int:
         return run_eval_splits(args)
     if args.split:
         raise UserError("--split needs --renderer NAME or --yud DIR")
+    if args.focal_given:
+        raise UserError("--focal-given goes with --renderer NAME (without it, the focal "
+                        "length is given unless --no-focal)")
     if args.variants:
         raise UserError("--variants needs --yud DIR (views of the York Urban DB photographs)")
     if args.scenes < 1:
@@ -289,16 +296,17 @@ def run_eval_splits(args) -> int:
             try:
                 reports[s] = run_split(renderer, s, cfg, args.workers,
                                        lambda d, t, p=progress, r=renderer, s=s: p.update(
-                                           d, t, f"{r} {s}"))
+                                           d, t, f"{r} {s}"), focal_given=args.focal_given)
             finally:
                 progress.close()
-        for line in format_splits(renderer, reports):
+        for line in format_splits(renderer, reports, args.focal_given):
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
     took = time.perf_counter() - start
     print(f"({took:.0f} s; companion eval --renderer {args.renderer}"
-          + (f" --split {split})" if split != "all" else ")"))
+          + (f" --split {split}" if split != "all" else "")
+          + (" --focal-given)" if args.focal_given else ")"))
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)

@@ -90,10 +90,13 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
             continue
         est = pipeline(frame.image, camera_height_m=controller.camera_height_m())
         cmd, history = confirm_reversal(
-            decide_turn(est.eta_deg, config.policy, est.scene_understood), history)
+            decide_turn(est.eta_deg, config.policy, est.scene_understood, est.range_m),
+            history)
         controller.submit(cmd, est.eta_deg, t_s=frame.captured_s,
                           obstacle_distance=from_estimate(
-                              est, config.mavlink.obstacle_distance_increment_deg))
+                              est, config.mavlink.obstacle_distance_increment_deg),
+                          range_m=est.range_m,
+                          path_m=est.path_m(config.policy.path_half_width_m))
         now = time.monotonic()
         health.decisions += 1
         health.last_decision_s = now

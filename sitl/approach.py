@@ -255,8 +255,9 @@ class RunResult:
     decision_ms: list[float] = field(default_factory=list)
     setpoint_ms: list[float] = field(default_factory=list)
     path: list[tuple[float, float]] = field(default_factory=list)
-    # per frame: (t_s, heading_deg in the room, η or None, action) as decided
-    decisions: list[tuple[float, float, float | None, str]] = field(default_factory=list)
+    # per frame: (t_s, heading_deg in the room, η or None, action, range_m, path_m) as
+    # decided (range and path distance None when not measured, path inf when clear)
+    decisions: list[tuple] = field(default_factory=list)
     detail: str = ""
 
 
@@ -393,14 +394,17 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                           pitch_deg=pose.pitch_deg, roll_deg=pose.roll_deg)
             image = render_image(scene, cam, supersample=1) if policy == "paper" else None
             t0 = time.perf_counter()  # the frame is taken: decide
-            eta, understood = _observe(policy, scene, cam, pipeline, image)
-            cmd, history = confirm_reversal(decide_turn(eta, cfg.policy, understood), history)
+            eta, understood, range_m, path_m = _observe(policy, scene, cam, pipeline, image,
+                                                        cfg.policy.path_half_width_m)
+            cmd, history = confirm_reversal(decide_turn(eta, cfg.policy, understood, range_m),
+                                            history)
             t_frame = controller.clock()
             t_wall = time.monotonic()
             result.decision_ms.append((time.perf_counter() - t0) * 1e3)
-            controller.submit(cmd, eta, t_s=t_frame)
+            controller.submit(cmd, eta, t_s=t_frame, range_m=range_m, path_m=path_m)
             result.decisions.append((round(result.time_s, 2), round(heading, 2),
-                                     None if eta is None else round(eta, 2), cmd.action))
+                                     None if eta is None else round(eta, 2), cmd.action,
+                                     _round(range_m), _round(path_m)))
             if controller.state.name == "active":
                 _wait_sent(controller, mock, t_frame, t_wall, result)
             elif mock is not None:
@@ -419,17 +423,26 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     return result
 
 
-def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None
-             ) -> tuple[float | None, bool]:
-    """η (or None) and whether the scene was understood, as the policy sees the frame
-    (``image``: the rendered frame, for ``paper``)."""
+def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None,
+             path_half_width_m: float
+             ) -> tuple[float | None, bool, float | None, float | None]:
+    """η (or None), whether the scene was understood, and the range and path distance
+    (:class:`~companion.control.supervisor.Decision`), as the policy sees the frame
+    (``image``: the rendered frame, for ``paper``, measured at the camera height the
+    autopilot reports, as the service does). The oracle knows no range."""
     if policy == "paper":
-        est = pipeline(image)
-        return est.eta_deg, est.scene_understood
+        est = pipeline(image, camera_height_m=cam.height_m)
+        return (est.eta_deg, est.scene_understood, est.range_m,
+                est.path_m(path_half_width_m))
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
-        return (truth.eta_deg if truth.corners_px else None), True
-    return None, True
+        return (truth.eta_deg if truth.corners_px else None), True, None, None
+    return None, True, None, None
+
+
+def _round(x: float | None) -> float | str | None:
+    """A distance for the JSON: 2 decimals, None as is, inf as the string "inf"."""
+    return None if x is None else ("inf" if math.isinf(x) else round(x, 2))
 
 
 def _wait_sent(controller, mock, t_frame: float, t_wall: float, result: RunResult) -> None:
@@ -466,7 +479,11 @@ def _one(job: tuple) -> tuple[Approach, RunResult]:
 
     seed, run, policy, kw = job
     logging.getLogger("mavsdk").setLevel(logging.ERROR)
+    kw = dict(kw)
+    speed = kw.pop("speed_m_s", None)
     ap = draw_approach(seed, run)
+    if speed is not None:
+        ap = replace(ap, speed_m_s=speed)
     from sitl.autopilot import free_udp_port
 
     port = None if kw.get("autopilot_url") else free_udp_port()
@@ -640,6 +657,8 @@ def simulate_approach(args, progress=None) -> int:
         raise ValueError("--runs must be at least 1")
     if not 0.5 <= args.camera_hz <= 60.0:
         raise ValueError("--camera-hz must be between 0.5 and 60")
+    if args.speed is not None and not 0.05 <= args.speed <= 5.0:
+        raise ValueError("--speed must be between 0.05 and 5 m/s")
     base = load_config(args.sim_config)
     started = time.perf_counter()
 
@@ -654,7 +673,8 @@ def simulate_approach(args, progress=None) -> int:
         results = run_approaches(
             args.runs, args.seed, args.policy, workers=max(1, args.workers), progress=report,
             autopilot_url=args.autopilot, camera_hz=args.camera_hz, width=args.width,
-            height=args.height, base=base, focal_given=not args.no_focal)
+            height=args.height, base=base, focal_given=not args.no_focal,
+            speed_m_s=args.speed)
     except AutopilotNotFound as exc:
         raise ValueError(str(exc)) from None
     if progress is not None:
@@ -662,8 +682,9 @@ def simulate_approach(args, progress=None) -> int:
     summary = summarize(results, args.policy, args.seed)
     for line in format_report(summary):
         print(line)
+    speed = "" if args.speed is None else f" --speed {args.speed:g}"
     print(f"({time.perf_counter() - started:.0f} s; companion sim --scenario approach "
-          f"--runs {args.runs} --seed {args.seed} --policy {args.policy})")
+          f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{speed})")
     for r in summary["per_run"]:
         if r["outcome"] == "error":
             print(f"run {r['run']}: error: {r['detail']}")

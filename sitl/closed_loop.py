@@ -332,6 +332,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="approach: runs side by side against the mock (default 2)")
     ap.add_argument("--no-focal", action="store_true",
                     help="approach: do not give the pipeline the camera's focal length")
+    ap.add_argument("--speed", type=float, default=None, metavar="M_S",
+                    help="approach: fly every run at this forward speed (default: drawn, "
+                         "0.4-0.8 m/s)")
     ap.add_argument("--json", metavar="PATH", help="approach: write the figures as JSON")
     ap.add_argument("--config", metavar="PATH", dest="sim_config",
                     help="approach: YAML config for the companion (policy, offboard ...)")

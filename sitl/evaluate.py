@@ -335,9 +335,11 @@ def format_report(report: EvalReport) -> list[str]:
 
 
 def run_split(renderer: str, split: str, config: Config | None = None,
-              workers: int | None = None, progress=None) -> dict[str, EvalReport]:
+              workers: int | None = None, progress=None, focal_given: bool = False
+              ) -> dict[str, EvalReport]:
     """One frozen split of one renderer at every camera of :data:`CAMERAS`, focal length
-    not given: {camera label: report}. ``progress(done, total)`` counts scenes."""
+    not given (unless ``focal_given``, a diagnosis): {camera label: report}.
+    ``progress(done, total)`` counts scenes."""
     seed, scenes = SPLITS[(renderer, split)]
     total = scenes * len(CAMERAS)
     out: dict[str, EvalReport] = {}
@@ -345,7 +347,8 @@ def run_split(renderer: str, split: str, config: Config | None = None,
         def step(done, _n, k=k):
             if progress:
                 progress(k * scenes + done, total)
-        out[label] = run_eval(scenes, seed, config, width=w, height=h, assume_focal=False,
+        out[label] = run_eval(scenes, seed, config, width=w, height=h,
+                              assume_focal=focal_given,
                               workers=workers, progress=step, renderer=renderer, hfov_deg=fov)
     return out
 
@@ -355,7 +358,8 @@ def _split_target(label: str) -> dict[str, float]:
     return SPLIT_TARGETS[320] if w <= 320 else SPLIT_TARGETS[fov]
 
 
-def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]]) -> list[str]:
+def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
+                  focal_given: bool = False) -> list[str]:
     """One table for a renderer: a row per camera and split, issue 18's targets beside."""
 
     def pct(x):
@@ -364,7 +368,8 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]]) -> l
     def deg(x):
         return "n/a" if x is None else f"{x:.2f}"
 
-    lines = [f"renderer {renderer}: focal length not given",
+    given = "given (a diagnosis: the targets are without it)" if focal_given else "not given"
+    lines = [f"renderer {renderer}: focal length {given}",
              f"{'camera':<14} {'split':<5} {'seed':>5} {'det %':>6} {'η med°':>7} {'η p90°':>7} "
              f"{'FP %':>5} {'sign✗':>7} {'corner %':>8}   targets det/med/p90"]
     for label, *_ in CAMERAS:

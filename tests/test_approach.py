@@ -95,7 +95,8 @@ def test_the_pipeline_flies_past_and_the_figures_are_written(tmp_path):
     out = tmp_path / "paper.json"
     plot = tmp_path / "paper.png"
     code = main(["sim", "--scenario", "approach", "--runs", "3", "--seed", "0",
-                 "--policy", "paper", "--json", str(out), "--plot", str(plot)])
+                 "--policy", "paper", "--speed", "0.6", "--json", str(out), "--plot",
+                 str(plot)])
     assert code == 0
     figures = json.loads(out.read_text())
     for key in ("scenario", "policy", "runs", "passed", "collisions", "timeouts",
@@ -105,6 +106,12 @@ def test_the_pipeline_flies_past_and_the_figures_are_written(tmp_path):
     assert figures["passed"] >= 2, figures["per_run"]
     assert figures["frame_to_setpoint_ms"]["median"] is not None
     assert plot.stat().st_size > 5000
+    assert all(r["speed_m_s"] == 0.6 for r in figures["per_run"])
+    # The pipeline measured range at the altitude the autopilot reported, as in flight:
+    # (t, heading, η, action, range_m, path_m) per frame.
+    ranges = [d[4] for r in figures["per_run"] for d in r["decisions"] if d[2] is not None]
+    measured = [x for x in ranges if x is not None]
+    assert measured and all(x > 0.5 for x in measured)  # nearer is below the view
 
 
 def test_summary_counts_outcomes():

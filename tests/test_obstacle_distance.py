@@ -42,9 +42,9 @@ def test_sectors_hold_the_face_between_two_feet_and_nothing_else():
     assert od.max_distance_cm == 2000  # 0.1 · h · f = 38 m, capped at 20 m
 
 
-def test_a_contact_beyond_reach_reads_nothing_within_reach():
+def test_a_contact_beyond_reach_is_unknown_never_free():
     od = obstacle_distance([[_contact(60.0, 0.0)]], 90.0, 73.7, 1.2, 320.0)
-    assert od.max_distance_cm + 1 in od.distances_cm
+    assert set(od.distances_cm) == {UNKNOWN}  # max + 1 would declare the sector free
 
 
 def _truth_distance(box, cam, bearing_deg):
@@ -97,6 +97,11 @@ def test_the_stream_reaches_the_autopilot_at_10_hz_and_is_never_too_far():
         got = [m for t, m in ap.obstacle_distances if t >= t0]
         stop.set()
         feeder.join(1)
+        # Vision stalls: the stream goes on, claiming nothing, once stale_after_s has passed.
+        stalled = time.monotonic() + cfg.offboard.stale_after_s + 0.2
+        time.sleep(cfg.offboard.stale_after_s + 0.8)
+        late = [m for t, m in ap.obstacle_distances if t >= stalled]
+    assert len(late) >= 3 and all(set(m["distances"]) == {UNKNOWN} for m in late)
     assert height == pytest.approx(1.3, abs=0.05)
     assert len(got) >= 2.0 * 10 * 0.9  # mavlink.obstacle_distance_hz = 10
     msg = got[-1]

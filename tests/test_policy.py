@@ -5,7 +5,7 @@ import math
 import pytest
 
 from companion.config import PolicyConfig
-from companion.control.policy import decide_turn
+from companion.control.policy import decide_turn, obstacle_matters, path_speed_scale
 
 P = PolicyConfig(max_turn_deg=30.0, deadband_deg=3.0, turn_time_s=1.0, max_yaw_rate_deg_s=25.0)
 
@@ -77,3 +77,19 @@ def test_heading_rate_is_table_ii_rate_toward_the_target():
     assert heading_rate(-175.0, 175.0, p) == 10.0  # the short way, across ±180°
     assert heading_rate(2.0, 0.0, p) == 0.0
     assert heading_rate(0.0, 20.0, p, max_rate_deg_s=10.0) == -10.0
+
+
+def test_an_obstacle_measured_beyond_act_within_is_not_turned_for():
+    p = PolicyConfig(act_within_m=6.0)
+    assert decide_turn(20.0, p, range_m=5.9).action == "right"
+    assert decide_turn(20.0, p, range_m=6.1).action == "forward"
+    assert decide_turn(20.0, p, range_m=None).action == "right"  # not measured: it matters
+    assert obstacle_matters(50.0, PolicyConfig(act_within_m=0.0))  # 0: rule off
+    assert decide_turn(20.0, p, scene_understood=False, range_m=9.0).action == "hold"
+
+
+def test_path_speed_scale_falls_from_slow_within_to_stop_within():
+    p = PolicyConfig(slow_within_m=2.0, stop_within_m=1.0)
+    assert [path_speed_scale(d, p) for d in (None, math.inf, 3.0, 2.0, 1.5, 1.0, 0.2)] == [
+        1.0, 1.0, 1.0, 1.0, 0.5, 0.0, 0.0]
+    assert path_speed_scale(0.5, PolicyConfig(slow_within_m=0.0)) == 1.0  # rule off

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from companion.vision.pipeline import Pipeline
-from companion.vision.ranging import down_direction, floor_point, obstacle_contact
+from companion.vision.ranging import (
+    FloorContact,
+    down_direction,
+    floor_point,
+    obstacle_contact,
+    path_distance,
+)
 from sitl.sample import sample_scene
 from sitl.scene import render
 
@@ -67,4 +73,30 @@ def test_no_height_no_range():
     scene, cam = sample_scene()
     image, _ = render(scene, cam)
     est = Pipeline()(image)
-    assert est.eta_deg is not None and est.range_m is None
+    assert est.eta_deg is not None and est.range_m is None and est.path_m(0.5) is None
+
+
+def at(x_m, y_m):
+    """A floor contact x ahead, y right of the camera."""
+    return FloorContact(math.hypot(x_m, y_m), math.degrees(math.atan2(y_m, x_m)), (0.0, 0.0))
+
+
+def test_path_distance_is_the_nearest_foot_or_face_inside_the_corridor():
+    # A face slanting across the path, its feet outside the corridor on both sides.
+    face = [at(2.0, -1.0), at(3.0, 1.0)]
+    assert path_distance([face], 0.5) == pytest.approx(2.25)  # where it crosses y = -0.5
+    assert path_distance([[at(1.5, 0.2)], face], 0.5) == pytest.approx(1.5)
+    # Feet and face beside the path: nothing in it.
+    assert math.isinf(path_distance([[at(1.0, 0.8), at(2.0, 1.5)]], 0.5))
+    assert math.isinf(path_distance([], 0.5))
+
+
+def test_the_pipeline_reports_the_path_distance_of_a_box_ahead():
+    scene, cam = sample_scene()
+    image, truth = render(scene, cam)
+    est = Pipeline()(image, camera_height_m=cam.height_m)
+    # A corridor wide enough for every foot: the nearest one's distance along the
+    # optical axis, no more than its range and no less than its range · cos(hfov / 2).
+    ahead = est.path_m(10.0)
+    assert est.range_m * math.cos(math.radians(cam.hfov_deg / 2)) <= ahead <= est.range_m
+    assert est.path_m(0.5) >= ahead

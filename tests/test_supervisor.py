@@ -258,3 +258,76 @@ def test_turn_slowdown_takes_the_share_of_the_turn_still_to_make():
     # ... and with 15° still to go, half the speed the ramp allows.
     step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0), 3.5, yaw_deg=15.0, config=slow)
     assert step.forward_m_s == pytest.approx(0.5 * 0.5 * 0.5)
+
+
+# ------------------------------------------------------------------ range
+
+
+def cruising(t_end=3.0):
+    """Engaged at 0 and flown at full speed (1 m/s) until ``t_end``, no obstacle."""
+    step = engaged()
+    for k in range(1, int(round(t_end / 0.05)) + 1):
+        step = fly(step.state, Decision(k * 0.05, FORWARD), k * 0.05)
+    assert step.forward_m_s == 1.0
+    return step
+
+
+def test_an_obstacle_close_in_the_path_slows_the_vehicle_and_a_closer_one_stops_it():
+    assert (POLICY.stop_within_m, POLICY.slow_within_m) == (0.8, 2.0)
+    step = cruising()
+    # 1.4 m ahead in the path: half-way between stop and slow, half the speed, at once.
+    step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, range_m=1.4, path_m=1.4), 3.0)
+    assert step.forward_m_s == pytest.approx(0.5) and step.yaw_rate_deg_s == 30.0
+    # 0.7 m: stopped, still turning away.
+    step = fly(step.state, Decision(3.2, RIGHT, 40.0, 0.0, range_m=0.7, path_m=0.7), 3.2)
+    assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == 30.0
+    # The obstacle measured beside the path (inf): full speed is ramped back to.
+    step = fly(step.state, Decision(3.4, FORWARD, 1.0, 30.0, range_m=0.9,
+                                    path_m=float("inf")), 3.4, yaw_deg=30.0)
+    assert step.forward_m_s == pytest.approx(0.5 * 0.2)
+
+
+def test_a_path_distance_is_dead_reckoned_while_the_foot_is_out_of_view_then_dropped():
+    step = cruising()
+    step = fly(step.state, Decision(3.0, FORWARD, 2.0, 0.0, range_m=1.9, path_m=1.9), 3.0)
+    assert step.forward_m_s == pytest.approx((1.9 - 0.8) / 1.2)
+    # Frames still see the obstacle, its foot below the view: the distance shrinks with
+    # what was flown, and the vehicle slows on toward a stop short of stop_within_m
+    # (speed in proportion to the distance left: it decays, time constant 1.2 s here).
+    speeds = []
+    for k in range(1, 40):
+        t = 3.0 + k * 0.05
+        frame_t = 3.0 + 0.2 * (k // 4)  # a 5 Hz camera
+        step = fly(step.state, Decision(frame_t, FORWARD, 2.0, 0.0), t)
+        speeds.append(step.forward_m_s)
+    assert 0.8 < step.state.path_m < 1.05 and speeds[-1] < 0.2
+    assert all(b <= a for a, b in zip(speeds, speeds[1:], strict=False))
+    # A frame without any obstacle forgets it: the ramp starts again.
+    step = fly(step.state, Decision(5.0, FORWARD), 5.0)
+    assert step.state.path_m is None and step.forward_m_s > 0.0
+    # Nor is a distance kept for longer than PATH_MEMORY_S without a measurement.
+    from companion.control.supervisor import PATH_MEMORY_S
+    step = fly(step.state, Decision(6.0, FORWARD, 2.0, 0.0, range_m=5.0, path_m=5.0), 6.0)
+    t = 6.0 + PATH_MEMORY_S + 0.05
+    step = fly(step.state, Decision(t, FORWARD, 2.0, 0.0), t)
+    assert step.state.path_m is None
+
+
+def test_an_obstacle_beyond_act_within_sets_no_target_and_the_course_resumes():
+    assert POLICY.act_within_m == 6.0
+    step = engaged(yaw_deg=0.0)
+    step = fly(step.state, Decision(0.1, FORWARD, 40.0, 0.0, range_m=9.0, path_m=9.0), 0.1)
+    assert step.state.target_deg is None and step.state.obstacle_t_s is None
+    step = fly(step.state, Decision(0.3, RIGHT, 40.0, 0.0, range_m=5.0, path_m=5.0), 0.3)
+    assert step.state.target_deg == 30.0
+
+
+def test_range_never_speeds_up_hovering_or_stale_vision():
+    hover = OffboardConfig(enabled=True, forward_speed_m_s=0.0)
+    step = engaged(config=hover)
+    step = fly(step.state, Decision(0.1, RIGHT, 20.0, 0.0, range_m=3.0, path_m=3.0), 0.1,
+               config=hover)
+    assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == 20.0
+    step = cruising()
+    stale = fly(step.state, Decision(3.0, FORWARD, 2.0, 0.0, range_m=9.0, path_m=9.0), 3.6)
+    assert stale.forward_m_s == 0.0

@@ -85,7 +85,9 @@ def obstacle_distance(obstacles: Iterable[Sequence[FloorContact]], hfov_deg: flo
 
     ``min_distance``: the nearest floor a level camera sees (the bottom of ``vfov_deg``);
     ``max_distance``: where one pixel of the contact's row is 10 % of the range
-    (0.1 · h · f), at most 20 m. A contact beyond it reads max + 1 (nothing within reach).
+    (0.1 · h · f), at most 20 m. A contact beyond it leaves its sector unknown: MAVLink's
+    max + 1 would tell PX4 the sector is free, and a foot that far is as likely a wall's
+    feature near the horizon as a real obstacle.
     """
     n = max(1, min(SECTORS, int(hfov_deg // increment_deg)))
     offset = -(n - 1) / 2.0 * increment_deg
@@ -108,10 +110,8 @@ def obstacle_distance(obstacles: Iterable[Sequence[FloorContact]], hfov_deg: flo
                     put(i, d)
     cm = []
     for d in best:
-        if math.isinf(d):
+        if math.isinf(d) or d > max_m:
             cm.append(UNKNOWN)
-        elif d > max_m:
-            cm.append(int(round(max_m * 100)) + 1)
         else:
             cm.append(int(round(max(d, min_m) * 100)))
     return ObstacleDistance(tuple(cm + [UNKNOWN] * (SECTORS - n)), float(increment_deg),

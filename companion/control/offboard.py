@@ -106,13 +106,15 @@ class OffboardController:
     # ------------------------------------------------------------------ any thread
     def submit(self, command: TurnCommand, eta_deg: float | None = None,
                t_s: float | None = None,
-               obstacle_distance: ObstacleDistance | None = None) -> None:
+               obstacle_distance: ObstacleDistance | None = None,
+               range_m: float | None = None, path_m: float | None = None) -> None:
         """Hand over the newest decision (``t_s``: when its frame was taken, on ``clock``).
-        It carries the heading the autopilot reports now, the frame's a few ms ago, and
-        the frame's OBSTACLE_DISTANCE sectors, if it measured any."""
+        It carries the heading the autopilot reports now, the frame's a few ms ago, the
+        frame's OBSTACLE_DISTANCE sectors, if it measured any, and its ranges
+        (:class:`~companion.control.supervisor.Decision`)."""
         pose = self.pose
         decision = sv.Decision(self.clock() if t_s is None else t_s, command, eta_deg,
-                               None if pose is None else pose.yaw_deg)
+                               None if pose is None else pose.yaw_deg, range_m, path_m)
         with self._lock:
             self._decision = decision
             self._obstacle_distance = (decision.t_s, obstacle_distance)

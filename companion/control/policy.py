@@ -29,6 +29,13 @@ paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
   obstacle behind and flew on into the side wall. Once no obstacle has been in view for
   ``resume_after_s``, the heading goes back to the course (the heading offboard engaged
   with) at most ``resume_max_rate_deg_s``.
+
+Range, when the camera height is known (:mod:`~companion.vision.ranging`, not in the
+paper): an obstacle whose floor contact is measured beyond ``act_within_m`` is not turned
+for (:func:`obstacle_matters`): far away, its face says little about the path the vehicle
+will fly; and the forward speed is scaled by :func:`path_speed_scale` from the distance to
+the nearest obstacle in the flight path, down to a stop at ``stop_within_m``, so that a
+late detection is turned away from rather than flown into.
 """
 
 from __future__ import annotations
@@ -40,7 +47,7 @@ from typing import Literal
 from companion.config import PolicyConfig
 
 __all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
-           "decide_turn", "heading_rate", "wrap_deg"]
+           "decide_turn", "heading_rate", "obstacle_matters", "path_speed_scale", "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
@@ -55,18 +62,41 @@ class TurnCommand:
     yaw_rate_deg_s: float
 
 
+def obstacle_matters(range_m: float | None, policy: PolicyConfig) -> bool:
+    """Whether an obstacle whose floor contact is ``range_m`` away (m; None: not measured)
+    is to be turned for: unless it is measured beyond ``act_within_m`` (0: always)."""
+    return range_m is None or policy.act_within_m <= 0.0 or range_m <= policy.act_within_m
+
+
+def path_speed_scale(path_m: float | None, policy: PolicyConfig) -> float:
+    """The share (0..1) of the forward speed to fly with the nearest obstacle in the flight
+    path ``path_m`` ahead (m; None or inf: none known): 1 from ``slow_within_m`` on, falling
+    linearly to 0 at ``stop_within_m``. ``slow_within_m`` 0 turns the rule off."""
+    if path_m is None or not math.isfinite(path_m) or policy.slow_within_m <= 0.0:
+        return 1.0
+    if path_m <= policy.stop_within_m:
+        return 0.0
+    span = policy.slow_within_m - policy.stop_within_m
+    return 1.0 if span <= 0.0 else min(1.0, (path_m - policy.stop_within_m) / span)
+
+
 def decide_turn(
-    eta_deg: float | None, policy: PolicyConfig, scene_understood: bool = True
+    eta_deg: float | None, policy: PolicyConfig, scene_understood: bool = True,
+    range_m: float | None = None,
 ) -> TurnCommand:
     """Table II: η (degrees, right positive, or None) → :class:`TurnCommand`.
 
     - no scene understanding (no layout found, e.g. a blank or blurred frame) → ``hold``:
       nothing to act on, yaw rate 0;
-    - no non-Manhattan obstacle (``eta_deg is None``) or ``|η| <= deadband`` → ``forward``;
+    - no non-Manhattan obstacle (``eta_deg is None``), one measured farther than
+      ``act_within_m`` (``range_m``, :func:`obstacle_matters`), or ``|η| <= deadband``
+      → ``forward``;
     - otherwise turn toward η's side by ``min(|η|, max_turn_deg)``.
     """
     if not scene_understood or (eta_deg is not None and not math.isfinite(eta_deg)):
         return TurnCommand("hold", 0.0, 0.0)
+    if not obstacle_matters(range_m, policy):
+        eta_deg = None
     if eta_deg is None or abs(eta_deg) <= policy.deadband_deg:
         return TurnCommand("forward", 0.0, 0.0)
     turn = math.copysign(min(abs(eta_deg), policy.max_turn_deg), eta_deg)

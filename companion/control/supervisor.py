@@ -30,10 +30,12 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   the scene is understood, also during a turn (less ``turn_slowdown`` × the share of
   ``max_turn_deg`` still to turn, when that is set: 0 by default, docs/flight.md); 0 at
   once on ``hold`` (scene not understood) and when vision is older than
-  ``stale_after_s``. Speed rises no faster than ``forward_accel_m_s2`` (from 0 on
-  engaging, and after every stop), and falls at once: PX4's own acceleration limits
-  shape the braking, the companion never delays it. Until the autopilot has reported a
-  heading, the yaw rate is the hovering one.
+  ``stale_after_s``. With range, it is scaled by ``policy.path_speed_scale`` from the
+  distance to the nearest obstacle in the path (:func:`path_ahead`), and an obstacle
+  measured beyond ``policy.act_within_m`` sets no heading to pass it. Speed rises no
+  faster than ``forward_accel_m_s2`` (from 0 on engaging, and after every stop), and
+  falls at once: PX4's own acceleration limits shape the braking, the companion never
+  delays it. Until the autopilot has reported a heading, the yaw rate is the hovering one.
 """
 
 from __future__ import annotations
@@ -43,11 +45,18 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 from companion.config import OffboardConfig, PolicyConfig
-from companion.control.policy import TurnCommand, avoidance_heading, heading_rate, wrap_deg
+from companion.control.policy import (
+    TurnCommand,
+    avoidance_heading,
+    heading_rate,
+    obstacle_matters,
+    path_speed_scale,
+    wrap_deg,
+)
 
 __all__ = [
     "Decision", "Step", "SupervisorState", "VehicleStatus", "enable", "forward_speed_setpoint",
-    "initial_state", "supervise", "turn_ends_at", "yaw_rate_setpoint",
+    "initial_state", "path_ahead", "supervise", "turn_ends_at", "yaw_rate_setpoint",
 ]
 
 StateName = Literal["disabled", "waiting", "engaging", "active", "link_lost"]
@@ -75,6 +84,9 @@ class Decision:
     command: TurnCommand
     eta_deg: float | None = None
     heading_deg: float | None = None  # the vehicle's heading when the frame was taken
+    range_m: float | None = None  # to the obstacle's floor contact; None: not measured
+    path_m: float | None = None  # to the nearest obstacle in the path; inf: none; None: not
+    #                              measured (ranging.path_distance)
 
 
 @dataclass(frozen=True)
@@ -90,6 +102,8 @@ class SupervisorState:
     obstacle_t_s: float | None = None  # when a decision last saw an obstacle
     target_deg: float | None = None  # the heading flown to pass it
     target_from_t_s: float | None = None  # the decision that set it
+    path_m: float | None = None  # the nearest obstacle in the path, dead-reckoned to now
+    path_t_s: float | None = None  # the decision that measured it
 
 
 @dataclass(frozen=True)
@@ -186,6 +200,10 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         keep = {} if engaged_now else {"obstacle_t_s": prev.obstacle_t_s,
                                        "target_deg": prev.target_deg,
                                        "target_from_t_s": prev.target_from_t_s}
+        if config.forward_speed_m_s > 0.0:
+            path, path_t = path_ahead(prev, decision, fresh, now_s, policy)
+            keep = {**keep, "path_m": path, "path_t_s": path_t}
+            forward = min(forward, config.forward_speed_m_s * path_speed_scale(path, policy))
         if config.forward_speed_m_s > 0.0 and course is not None and vehicle.yaw_deg is not None:
             keep = _pass_target(keep, decision, fresh, course, policy)
             target, seen_t = keep.get("target_deg"), keep.get("obstacle_t_s")
@@ -257,7 +275,8 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
     from its η and heading; one whose turn the reversal rule held back (``forward`` with
     η outside the deadband) leaves the target as it was.
     """
-    if not fresh or decision is None or decision.eta_deg is None:
+    if (not fresh or decision is None or decision.eta_deg is None
+            or not obstacle_matters(decision.range_m, policy)):
         return keep
     keep = {**keep, "obstacle_t_s": decision.t_s}
     if decision.heading_deg is None or decision.t_s == keep.get("target_from_t_s"):
@@ -267,6 +286,32 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
         keep["target_deg"] = avoidance_heading(eta, decision.heading_deg, course_deg, policy)
         keep["target_from_t_s"] = decision.t_s
     return keep
+
+
+PATH_MEMORY_S = 2.0
+"""How long a path distance is dead-reckoned without a new measurement: a close
+obstacle's foot drops below the view (1.5 m at 1 m height and a 90° lens), yet it is
+still there; after this the vehicle, stopped and turning, goes on."""
+
+
+def path_ahead(prev: SupervisorState, decision: Decision | None, fresh: bool, now_s: float,
+               policy: PolicyConfig) -> tuple[float | None, float | None]:
+    """The distance (m) to the nearest obstacle in the flight path at ``now_s`` and the
+    decision time it was measured at: a new decision's measurement (``path_m``, inf when
+    the path is clear); else the last one less what was flown since (the forward speed
+    streamed), while frames still see an obstacle, for at most :data:`PATH_MEMORY_S`;
+    else None (not known)."""
+    if not fresh or decision is None:
+        return None, None
+    if decision.path_m is not None and decision.t_s != prev.path_t_s:
+        return decision.path_m, decision.t_s
+    last, since = prev.path_m, prev.path_t_s
+    if last is None or since is None or not math.isfinite(last):
+        return (last, since) if decision.t_s == since else (None, None)
+    if (decision.t_s != since and decision.eta_deg is None) or now_s - since > PATH_MEMORY_S:
+        return None, None  # a newer frame sees no obstacle, or the measurement is too old
+    dt = 0.0 if prev.tick_t_s is None else max(now_s - prev.tick_t_s, 0.0)
+    return last - max(prev.forward_m_s, 0.0) * dt, since
 
 
 def enable(state: SupervisorState) -> SupervisorState:

@@ -9,6 +9,7 @@ detector (built once) and measures how long each stage took.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -27,7 +28,7 @@ from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
-from companion.vision.ranging import FloorContact, floor_contacts
+from companion.vision.ranging import FloorContact, floor_contacts, path_distance
 from companion.vision.tracking import Track, update_track
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
@@ -154,6 +155,17 @@ class Estimate:
     def range_m(self) -> float | None:
         """Horizontal distance to the primary obstacle's floor contact, metres."""
         return None if self.contact is None else self.contact.range_m
+
+    def path_m(self, half_width_m: float) -> float | None:
+        """Distance (m) to the nearest measured floor contact in a corridor of
+        ``half_width_m`` ahead (:func:`~companion.vision.ranging.path_distance`); inf when
+        nothing measured is in it or no obstacle is seen; None when obstacles are seen but
+        none could be measured (no camera height, or no foot in view)."""
+        if not self.obstacles:
+            return math.inf if self.camera_height_m else None
+        if not any(self.obstacle_contacts):
+            return None
+        return path_distance(self.obstacle_contacts, half_width_m)
 
     @property
     def latency_ms(self) -> float:

@@ -16,13 +16,15 @@ direction). Pure functions over arrays; distances in metres, angles in degrees.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from companion.vision.geometry import direction_of
 
-__all__ = ["FloorContact", "floor_point", "floor_contacts", "obstacle_contact", "down_direction"]
+__all__ = ["FloorContact", "floor_point", "floor_contacts", "obstacle_contact", "down_direction",
+           "path_distance"]
 
 VERTICAL_EDGE_TOL_DEG = 2.0
 """two corners are on one vertical edge when their line points at V3 within this"""
@@ -103,3 +105,28 @@ def obstacle_contact(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
     """The nearest of :func:`floor_contacts`, None without any."""
     contacts = floor_contacts(corners_px, v3, focal_px, centre, camera_height_m)
     return min(contacts, key=lambda c: c.range_m) if contacts else None
+
+
+def path_distance(obstacles: Iterable[Sequence[FloorContact]], half_width_m: float
+                  ) -> float:
+    """How far ahead (m, along the camera's forward direction on the floor) the nearest
+    measured floor contact lies within the corridor ``|lateral| <= half_width_m`` the
+    vehicle flies through; ``math.inf`` when none does (the measured obstacles are beside
+    the path).
+
+    ``obstacles``: per obstacle its contacts sorted by bearing (:func:`floor_contacts`);
+    the floor edge between two neighbours is one face's foot, clipped to the corridor. An
+    obstacle's part beyond its outermost visible foot is not known, so not counted.
+    """
+    best = math.inf
+    for contacts in obstacles:
+        pts = [(c.range_m * math.cos(math.radians(c.bearing_deg)),
+                c.range_m * math.sin(math.radians(c.bearing_deg))) for c in contacts]
+        for x, y in pts:
+            if abs(y) <= half_width_m:
+                best = min(best, x)
+        for (x1, y1), (x2, y2) in zip(pts, pts[1:], strict=False):
+            for edge_y in (-half_width_m, half_width_m):  # where the foot crosses the edges
+                if (y1 - edge_y) * (y2 - edge_y) < 0:
+                    best = min(best, x1 + (x2 - x1) * (edge_y - y1) / (y2 - y1))
+    return best if best > 0 else math.inf
