@@ -85,8 +85,8 @@ class PolicyConfig:
     # the flight path closer than slow_within_m slows the vehicle, to a stop at
     # stop_within_m. 0 turns the rule off.
     act_within_m: float = field(default=6.0, metadata=_range(0.0, 100.0))
-    slow_within_m: float = field(default=2.0, metadata=_range(0.0, 100.0))
-    stop_within_m: float = field(default=0.8, metadata=_range(0.0, 100.0))
+    slow_within_m: float = field(default=3.5, metadata=_range(0.0, 100.0))
+    stop_within_m: float = field(default=1.5, metadata=_range(0.0, 100.0))
     path_half_width_m: float = field(default=0.5, metadata=_range(0.05, 10.0))
 
 

@@ -17,7 +17,8 @@ from companion.control.supervisor import (
 
 CFG = OffboardConfig(enabled=True, stale_after_s=0.5, hold_after_s=3.0, confirm_timeout_s=3.0,
                      retry_after_s=5.0)
-POLICY = PolicyConfig(max_turn_deg=30.0, max_yaw_rate_deg_s=30.0)
+POLICY = PolicyConfig(max_turn_deg=30.0, max_yaw_rate_deg_s=30.0, slow_within_m=2.0,
+                      stop_within_m=0.8)
 FLYING = VehicleStatus(connected=True, armed=True, in_air=True)
 IN_OFFBOARD = VehicleStatus(connected=True, armed=True, in_air=True, offboard=True)
 RIGHT = TurnCommand("right", 20.0, 20.0)
@@ -209,8 +210,13 @@ def test_the_heading_is_held_in_closed_loop_and_the_course_resumed_after_the_obs
     # Out of view: not at once ...
     step = fly(step.state, Decision(1.5, FORWARD, None, 41.0), 1.5, yaw_deg=41.0)
     assert step.yaw_rate_deg_s == 0.0
-    # ... but resume_after_s later, back left toward 0°, at most resume_max_rate_deg_s.
+    # ... nor resume_after_s later while the vehicle, still speeding up, has flown less
+    # than full speed covers in that time (1 m) ...
     step = fly(step.state, Decision(2.1, FORWARD, None, 41.0), 2.1, yaw_deg=41.0)
+    assert step.yaw_rate_deg_s == 0.0 and step.state.flown_since_seen_m < 1.0
+    # ... but once it has: back left toward 0°, at most resume_max_rate_deg_s.
+    step = fly(step.state, Decision(2.4, FORWARD, None, 41.0), 2.4, yaw_deg=41.0)
+    assert step.state.flown_since_seen_m == pytest.approx(1.0)
     assert step.yaw_rate_deg_s == -POLICY.resume_max_rate_deg_s
     step = fly(step.state, Decision(3.0, FORWARD, None, 5.0), 3.0, yaw_deg=5.0)
     assert step.yaw_rate_deg_s == pytest.approx(-5.0 / POLICY.turn_time_s)
@@ -331,3 +337,20 @@ def test_range_never_speeds_up_hovering_or_stale_vision():
     step = cruising()
     stale = fly(step.state, Decision(3.0, FORWARD, 2.0, 0.0, range_m=9.0, path_m=9.0), 3.6)
     assert stale.forward_m_s == 0.0
+
+
+def test_a_vehicle_slowed_by_range_resumes_the_course_only_once_it_has_flown_past():
+    step = cruising()  # course 0°, 1 m/s
+    # An obstacle 1.1 m ahead in the path: a quarter of the speed (slow 2 m, stop 0.8 m).
+    step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, range_m=1.1, path_m=1.1), 3.0)
+    assert step.forward_m_s == pytest.approx(0.25)
+    t, flown_at_resume = 3.0, None
+    while t < 12.0 and flown_at_resume is None:  # out of view from the next frame on
+        t = round(t + 0.05, 2)
+        step = fly(step.state, Decision(t, FORWARD), t, yaw_deg=30.0)
+        if step.yaw_rate_deg_s < 0.0:  # turning back to the course
+            flown_at_resume = step.state.flown_since_seen_m
+    # Not after resume_after_s (1 s at a quarter speed and ramping is well short of 1 m) ...
+    assert t > 3.0 + POLICY.resume_after_s + 0.2
+    # ... but once 1 m (what full speed covers in resume_after_s) had been flown.
+    assert flown_at_resume == pytest.approx(1.0, abs=0.06)

@@ -32,7 +32,8 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   once on ``hold`` (scene not understood) and when vision is older than
   ``stale_after_s``. With range, it is scaled by ``policy.path_speed_scale`` from the
   distance to the nearest obstacle in the path (:func:`path_ahead`), and an obstacle
-  measured beyond ``policy.act_within_m`` sets no heading to pass it. Speed rises no
+  measured beyond ``policy.act_within_m`` sets no heading to pass it. The course resumes
+  only once the distance full speed covers in ``resume_after_s`` has also been flown. Speed rises no
   faster than ``forward_accel_m_s2`` (from 0 on engaging, and after every stop), and
   falls at once: PX4's own acceleration limits shape the braking, the companion never
   delays it. Until the autopilot has reported a heading, the yaw rate is the hovering one.
@@ -104,6 +105,7 @@ class SupervisorState:
     target_from_t_s: float | None = None  # the decision that set it
     path_m: float | None = None  # the nearest obstacle in the path, dead-reckoned to now
     path_t_s: float | None = None  # the decision that measured it
+    flown_since_seen_m: float = 0.0  # forward distance streamed since obstacle_t_s
 
 
 @dataclass(frozen=True)
@@ -207,10 +209,18 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         if config.forward_speed_m_s > 0.0 and course is not None and vehicle.yaw_deg is not None:
             keep = _pass_target(keep, decision, fresh, course, policy)
             target, seen_t = keep.get("target_deg"), keep.get("obstacle_t_s")
+            flown = 0.0 if engaged_now or seen_t != prev.obstacle_t_s else (
+                prev.flown_since_seen_m + max(was, 0.0) * max(dt, 0.0))
+            keep["flown_since_seen_m"] = flown
+            # The course resumes resume_after_s after the obstacle left the view, and once
+            # as far has been flown as that takes at full speed: a vehicle slowed by range
+            # has not yet passed what it last saw beside it.
+            passed = seen_t is None or (
+                now_s - seen_t >= policy.resume_after_s
+                and flown >= policy.resume_after_s * config.forward_speed_m_s - 1e-9)
             rate = 0.0
             if fresh:  # also in hold: the heading comes from telemetry, not this frame
-                if policy.resume_course and (seen_t is None
-                                             or now_s - seen_t >= policy.resume_after_s):
+                if policy.resume_course and passed:
                     rate = heading_rate(course, vehicle.yaw_deg, policy,
                                         policy.resume_max_rate_deg_s)
                 elif target is not None:
