@@ -27,8 +27,9 @@ paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
 - the course resumed: Table II aligns the heading with the face, up to 45° off the course
   the pilot set, and nothing in the paper ever turns back, so the vehicle left the
   obstacle behind and flew on into the side wall. Once no obstacle has been in view for
-  ``resume_after_s``, the heading goes back to the course (the heading offboard engaged
-  with) at most ``resume_max_rate_deg_s``.
+  ``resume_after_s`` (and, flying slower, for as far as full speed covers in that time:
+  ``supervisor.supervise``), the heading goes back to the course (the heading offboard
+  engaged with) at most ``resume_max_rate_deg_s``.
 
 Range, when the camera height is known (:mod:`~companion.vision.ranging`, not in the
 paper): an obstacle whose floor contact is measured beyond ``act_within_m`` is not turned
