@@ -58,7 +58,13 @@ import cv2
 import numpy as np
 
 from companion.config import Config, MavlinkConfig
-from companion.control.policy import TurnHistory, confirm_reversal, decide_turn, wrap_deg
+from companion.control.policy import (
+    TurnHistory,
+    confirm_reversal,
+    decide_turn,
+    steering_eta,
+    wrap_deg,
+)
 from sitl.scene import (
     Box,
     Camera,
@@ -432,8 +438,8 @@ def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray
     autopilot reports, as the service does). The oracle knows no range."""
     if policy == "paper":
         est = pipeline(image, camera_height_m=cam.height_m)
-        return (est.eta_deg, est.scene_understood, est.range_m,
-                est.path_m(path_half_width_m))
+        eta = steering_eta(est.eta_deg, est.eta_tracked_deg, pipeline.config.policy)
+        return eta, est.scene_understood, est.range_m, est.path_m(path_half_width_m)
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
         return (truth.eta_deg if truth.corners_px else None), True, None, None
@@ -484,14 +490,25 @@ def _one(job: tuple) -> tuple[Approach, RunResult]:
     ap = draw_approach(seed, run)
     if speed is not None:
         ap = replace(ap, speed_m_s=speed)
+    from companion.control.offboard import AutopilotNotFound
     from sitl.autopilot import free_udp_port
 
-    port = None if kw.get("autopilot_url") else free_udp_port()
     saved = os.dup(2)
     try:
         with open(os.devnull, "w") as devnull:
             os.dup2(devnull.fileno(), 2)
-        return ap, fly_approach(ap, policy, port=port, **kw)
+        for attempt in range(3):
+            port = None if kw.get("autopilot_url") else free_udp_port()
+            try:
+                return ap, fly_approach(ap, policy, port=port, **kw)
+            except AutopilotNotFound:
+                raise  # no autopilot at the URL: the whole set's one-line error
+            except Exception as exc:
+                if port is not None and "BIND_ERROR" in str(exc) and attempt < 2:
+                    continue  # the other worker took the free port before MAVSDK bound it
+                return ap, RunResult(run, "error", None, 0.0, 0, math.inf, 0.0, math.nan,
+                                     detail=f"{exc.__class__.__name__}: {exc}")
+        raise AssertionError("unreachable")
     finally:
         os.dup2(saved, 2)
         os.close(saved)

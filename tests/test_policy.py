@@ -93,3 +93,13 @@ def test_path_speed_scale_falls_from_slow_within_to_stop_within():
     assert [path_speed_scale(d, p) for d in (None, math.inf, 3.0, 2.0, 1.5, 1.0, 0.2)] == [
         1.0, 1.0, 1.0, 1.0, 0.5, 0.0, 0.0]
     assert path_speed_scale(0.5, PolicyConfig(slow_within_m=0.0)) == 1.0  # rule off
+
+
+def test_steering_eta_is_the_frames_unless_a_confirmed_track_is_asked_for():
+    from companion.control.policy import steering_eta
+
+    tracked = PolicyConfig(steer_by_track=True)
+    assert steering_eta(44.0, -46.0, PolicyConfig()) == 44.0  # the paper: per frame
+    assert steering_eta(44.0, -46.0, tracked) == -46.0  # the track's face, held
+    assert steering_eta(12.0, None, tracked) == 12.0  # no confirmed track yet
+    assert steering_eta(None, 20.0, tracked) == 20.0  # a dropout bridged by the track

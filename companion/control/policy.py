@@ -48,7 +48,8 @@ from typing import Literal
 from companion.config import PolicyConfig
 
 __all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
-           "decide_turn", "heading_rate", "obstacle_matters", "path_speed_scale", "wrap_deg"]
+           "decide_turn", "heading_rate", "obstacle_matters", "path_speed_scale",
+           "steering_eta", "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
@@ -61,6 +62,15 @@ class TurnCommand:
     action: Action
     turn_deg: float
     yaw_rate_deg_s: float
+
+
+def steering_eta(eta_deg: float | None, eta_tracked_deg: float | None,
+                 policy: PolicyConfig) -> float | None:
+    """The η to steer by: the frame's (eq. 10), or with ``steer_by_track`` the tracked one
+    where a track is confirmed (it holds eq. 9's choice of face and bridges dropouts)."""
+    if policy.steer_by_track and eta_tracked_deg is not None:
+        return eta_tracked_deg
+    return eta_deg
 
 
 def obstacle_matters(range_m: float | None, policy: PolicyConfig) -> bool:
