@@ -400,8 +400,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                           pitch_deg=pose.pitch_deg, roll_deg=pose.roll_deg)
             image = render_image(scene, cam, supersample=1) if policy == "paper" else None
             t0 = time.perf_counter()  # the frame is taken: decide
-            eta, understood, range_m, path_m = _observe(policy, scene, cam, pipeline, image,
-                                                        cfg.policy.path_half_width_m)
+            eta, understood, range_m, path_m = _observe(policy, scene, cam, pipeline, image)
             cmd, history = confirm_reversal(decide_turn(eta, cfg.policy, understood, range_m),
                                             history)
             t_frame = controller.clock()
@@ -429,8 +428,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     return result
 
 
-def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None,
-             path_half_width_m: float
+def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None
              ) -> tuple[float | None, bool, float | None, float | None]:
     """η (or None), whether the scene was understood, and the range and path distance
     (:class:`~companion.control.supervisor.Decision`), as the policy sees the frame
@@ -438,8 +436,10 @@ def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray
     autopilot reports, as the service does). The oracle knows no range."""
     if policy == "paper":
         est = pipeline(image, camera_height_m=cam.height_m)
-        eta = steering_eta(est.eta_deg, est.eta_tracked_deg, pipeline.config.policy)
-        return eta, est.scene_understood, est.range_m, est.path_m(path_half_width_m)
+        policy_cfg = pipeline.config.policy
+        eta = steering_eta(est.eta_deg, est.eta_tracked_deg, policy_cfg)
+        return (eta, est.scene_understood, est.range_m,
+                est.path_m(policy_cfg.path_half_width_m))
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
         return (truth.eta_deg if truth.corners_px else None), True, None, None

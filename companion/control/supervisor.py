@@ -33,10 +33,11 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   ``stale_after_s``. With range, it is scaled by ``policy.path_speed_scale`` from the
   distance to the nearest obstacle in the path (:func:`path_ahead`), and an obstacle
   measured beyond ``policy.act_within_m`` sets no heading to pass it. The course resumes
-  only once the distance full speed covers in ``resume_after_s`` has also been flown. Speed rises no
-  faster than ``forward_accel_m_s2`` (from 0 on engaging, and after every stop), and
-  falls at once: PX4's own acceleration limits shape the braking, the companion never
-  delays it. Until the autopilot has reported a heading, the yaw rate is the hovering one.
+  only once the distance full speed covers in ``resume_after_s`` has also been flown.
+  Speed rises no faster than ``forward_accel_m_s2`` (from 0 on engaging, and after every
+  stop), and falls at once: PX4's own acceleration limits shape the braking, the
+  companion never delays it. Until the autopilot has reported a heading, the yaw rate is
+  the hovering one.
 """
 
 from __future__ import annotations
@@ -197,20 +198,21 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         engaged_now = prev.name != "active"
         was = 0.0 if engaged_now else prev.forward_m_s
         dt = 0.0 if prev.tick_t_s is None else now_s - prev.tick_t_s
+        flown_m = max(was, 0.0) * max(dt, 0.0)  # since the last tick, at the speed streamed
         forward = forward_speed_setpoint(decision, now_s, was, dt, config)
         course = vehicle.yaw_deg if engaged_now else prev.course_deg
         keep = {} if engaged_now else {"obstacle_t_s": prev.obstacle_t_s,
                                        "target_deg": prev.target_deg,
                                        "target_from_t_s": prev.target_from_t_s}
         if config.forward_speed_m_s > 0.0:
-            path, path_t = path_ahead(prev, decision, fresh, now_s, policy)
+            path, path_t = path_ahead(prev, decision, fresh, now_s, flown_m)
             keep = {**keep, "path_m": path, "path_t_s": path_t}
             forward = min(forward, config.forward_speed_m_s * path_speed_scale(path, policy))
         if config.forward_speed_m_s > 0.0 and course is not None and vehicle.yaw_deg is not None:
             keep = _pass_target(keep, decision, fresh, course, policy)
             target, seen_t = keep.get("target_deg"), keep.get("obstacle_t_s")
             flown = 0.0 if engaged_now or seen_t != prev.obstacle_t_s else (
-                prev.flown_since_seen_m + max(was, 0.0) * max(dt, 0.0))
+                prev.flown_since_seen_m + flown_m)
             keep["flown_since_seen_m"] = flown
             # The course resumes resume_after_s after the obstacle left the view, and once
             # as far has been flown as that takes at full speed: a vehicle slowed by range
@@ -305,12 +307,12 @@ still there; after this the vehicle, stopped and turning, goes on."""
 
 
 def path_ahead(prev: SupervisorState, decision: Decision | None, fresh: bool, now_s: float,
-               policy: PolicyConfig) -> tuple[float | None, float | None]:
+               flown_m: float) -> tuple[float | None, float | None]:
     """The distance (m) to the nearest obstacle in the flight path at ``now_s`` and the
     decision time it was measured at: a new decision's measurement (``path_m``, inf when
-    the path is clear); else the last one less what was flown since (the forward speed
-    streamed), while frames still see an obstacle, for at most :data:`PATH_MEMORY_S`;
-    else None (not known)."""
+    the path is clear); else the last one less ``flown_m`` (flown since the last tick),
+    while frames still see an obstacle, for at most :data:`PATH_MEMORY_S`; else None (not
+    known)."""
     if not fresh or decision is None:
         return None, None
     if decision.path_m is not None and decision.t_s != prev.path_t_s:
@@ -320,8 +322,7 @@ def path_ahead(prev: SupervisorState, decision: Decision | None, fresh: bool, no
         return (last, since) if decision.t_s == since else (None, None)
     if (decision.t_s != since and decision.eta_deg is None) or now_s - since > PATH_MEMORY_S:
         return None, None  # a newer frame sees no obstacle, or the measurement is too old
-    dt = 0.0 if prev.tick_t_s is None else max(now_s - prev.tick_t_s, 0.0)
-    return last - max(prev.forward_m_s, 0.0) * dt, since
+    return last - flown_m, since
 
 
 def enable(state: SupervisorState) -> SupervisorState:
