@@ -61,11 +61,7 @@ class ObstacleDistance:
 def _along(c1: FloorContact, c2: FloorContact, bearing_deg: float) -> float | None:
     """Distance along ``bearing_deg`` to the floor segment between two contacts, None if
     the bearing misses it."""
-    def xy(c):
-        b = math.radians(c.bearing_deg)
-        return c.range_m * math.cos(b), c.range_m * math.sin(b)
-
-    (x1, y1), (x2, y2) = xy(c1), xy(c2)
+    (x1, y1), (x2, y2) = c1.ahead_right_m, c2.ahead_right_m
     b = math.radians(bearing_deg)
     ux, uy = math.cos(b), math.sin(b)
     dx, dy = x2 - x1, y2 - y1

@@ -43,6 +43,12 @@ class FloorContact:
     bearing_deg: float
     pixel: tuple[float, float]
 
+    @property
+    def ahead_right_m(self) -> tuple[float, float]:
+        """The contact on the floor: metres ahead of the camera and to its right."""
+        b = math.radians(self.bearing_deg)
+        return self.range_m * math.cos(b), self.range_m * math.sin(b)
+
 
 def down_direction(v3: np.ndarray, focal_px: float, centre: np.ndarray) -> np.ndarray:
     """Unit vector of the world's down direction in camera coordinates (x right, y down,
@@ -120,8 +126,7 @@ def path_distance(obstacles: Iterable[Sequence[FloorContact]], half_width_m: flo
     """
     best = math.inf
     for contacts in obstacles:
-        pts = [(c.range_m * math.cos(math.radians(c.bearing_deg)),
-                c.range_m * math.sin(math.radians(c.bearing_deg))) for c in contacts]
+        pts = [c.ahead_right_m for c in contacts]
         for x, y in pts:
             if abs(y) <= half_width_m:
                 best = min(best, x)
