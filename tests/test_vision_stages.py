@@ -512,3 +512,70 @@ def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
     # With no noise allowance only the angle-and-residual rule is left.
     strict = table1_labels(segs, vps, CornerParams(manhattan_leg_noise_px=0.0))
     assert strict.tolist() == [NONE, NONE, NONE, V1]
+
+
+def _tilted_box_edges(yaw_deg, rng, noise_px):
+    """The top and bottom edges of the two visible faces of a box ``yaw_deg`` off the room,
+    seen by a camera pitched 4° down and rolled 3°, endpoints moved by ``noise_px``.
+    Returns the edges, the layout (true V1, V2, V3) and the true OVP directions."""
+    from companion.vision.geometry import point_of
+    from companion.vision.vanishing import LayoutVPs
+
+    def rot(axis, deg):
+        c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+        i, j = [k for k in range(3) if k != axis]
+        m = np.eye(3)
+        m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
+        return m
+
+    world_to_cam = rot(2, 3.0) @ rot(0, -4.0)  # roll about z, pitch about x
+    a = np.radians(yaw_deg)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.3, 1.2, 4.0])
+    up = np.array([0.0, -0.9, 0.0])  # below eye level
+    ends = [(front, front + 0.9 * u), (front + up, front + up + 0.9 * u),
+            (front, front + 0.7 * v), (front + up, front + up + 0.7 * v)]
+    segs = np.array([[*_project([world_to_cam @ p])[0], *_project([world_to_cam @ q])[0]]
+                     for p, q in ends])
+    segs += rng.normal(0.0, noise_px, segs.shape)
+    room = point_of((world_to_cam @ np.eye(3)[[0, 2, 1]].T).T, F, C)  # x, z, then down (y)
+    layout = LayoutVPs(vps=room, observed=(True, True, True), support_px=np.ones(3),
+                       focal_px=F, centre=C)
+    return segs, layout, (world_to_cam @ u, world_to_cam @ v)
+
+
+def test_box_ovps_are_fitted_horizontal_and_orthogonal_and_steadier_than_two_edges():
+    from companion.vision.obstacles import fit_box_ovps
+
+    rng = np.random.default_rng(3)
+    free_err, fit_err = [], []
+    for _ in range(40):
+        segs, layout, (du, dv) = _tilted_box_edges(rng.uniform(10.0, 40.0), rng, 0.7)
+        lines = np.cross(np.c_[segs[:, :2], np.ones(4)], np.c_[segs[:, 2:], np.ones(4)])
+        free = np.array([np.cross(lines[0], lines[1]), np.cross(lines[2], lines[3])])
+        fitted = fit_box_ovps(segs, free, layout)
+        assert fitted is not None
+        d = direction_of(fitted, F, C)
+        up = direction_of(layout.vps[2], F, C)
+        assert abs(d @ up).max() < 1e-9  # on the horizon
+        assert abs(d[0] @ d[1]) < 1e-9  # at a right angle
+        fit_err.append(angle_between_directions_deg(d[0], du))
+        free_err.append(angle_between_directions_deg(direction_of(free[0], F, C), du))
+        # Same order as given: O1 still the face along u.
+        assert angle_between_directions_deg(d[1], dv) == pytest.approx(fit_err[-1], abs=1e-6)
+    assert np.median(fit_err) < 0.5 * np.median(free_err)
+    assert np.percentile(fit_err, 90) < 0.5 * np.percentile(free_err, 90)
+
+
+def test_box_ovps_need_an_edge_toward_each_ovp():
+    from companion.vision.obstacles import fit_box_ovps
+
+    segs, layout, _ = _tilted_box_edges(25.0, np.random.default_rng(0), 0.0)
+    lines = np.cross(np.c_[segs[:, :2], np.ones(4)], np.c_[segs[:, 2:], np.ones(4)])
+    free = np.array([np.cross(lines[0], lines[1]), np.cross(lines[2], lines[3])])
+    assert fit_box_ovps(segs[:2], free, layout) is None  # one face's edges only
+    # Noise-free, the fit gives back the exact OVPs.
+    fitted = fit_box_ovps(segs, free, layout)
+    for got, want in zip(fitted, free, strict=True):
+        assert angle_between_directions_deg(direction_of(got, F, C),
+                                            direction_of(want, F, C)) < 1e-6

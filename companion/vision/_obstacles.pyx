@@ -10,6 +10,7 @@ from libc.stdlib cimport free, malloc, realloc
 from companion.vision._geometry cimport (
     angle_between_deg,
     cross3,
+    dot3,
     end_distance,
     endpoint_weight,
     pixel_point,
@@ -36,6 +37,7 @@ cdef struct Params:
     double merge_deg
     double member_angle_deg
     double refit_slack_deg
+    bint box_fit
     double radius_px
     double leg_gap_frac
 
@@ -729,6 +731,97 @@ cdef void refit_ovp(double[:, ::1] s, double[:, ::1] lines, list legs, const dou
     out[0], out[1], out[2] = vp[0], vp[1], vp[2]
 
 
+cdef bint box_ovps_fit(Frame* fr, double[:, ::1] s, double[:, ::1] lines, list legs,
+                       double max_sin, double* o1, double* o2) noexcept:
+    """O1, O2 refit in place as one box's yaw ψ about V3 (see
+    :func:`companion.vision.obstacles.fit_box_ovps`); False, and both left as they were,
+    when either OVP has no leg pointing at it within ``max_sin``."""
+    cdef double a[3]
+    cdef double b[3]
+    cdef double n[3]
+    cdef double d[3]
+    cdef double up_a, na, nb, pr, qr, w, lam, x, y, x2, y2, nrm
+    cdef double m00 = 0.0, m01 = 0.0, m11 = 0.0
+    cdef bint seen1 = False, seen2 = False, first
+    cdef Py_ssize_t i, k
+    direction_of(fr, o1, a)
+    up_a = dot3(a, fr.d3)
+    for k in range(3):
+        a[k] -= up_a * fr.d3[k]
+    if unit3(a) < 1e-9:
+        return False
+    cross3(fr.d3, a, b)
+    for i in legs:
+        if vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o1) <= max_sin:
+            first = True
+            seen1 = True
+        elif vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o2) <= max_sin:
+            first = False
+            seen2 = True
+        else:
+            continue
+        # The plane through the camera centre and the leg: normal Kᵀ l.
+        n[0] = fr.f * lines[i, 0]
+        n[1] = fr.f * lines[i, 1]
+        n[2] = fr.cx * lines[i, 0] + fr.cy * lines[i, 1] + lines[i, 2]
+        unit3(n)
+        na, nb = dot3(n, a), dot3(n, b)
+        # d1(ψ) = cos ψ a + sin ψ b, d2(ψ) = −sin ψ a + cos ψ b: n·d = pr cos ψ + qr sin ψ.
+        pr, qr = (na, nb) if first else (nb, -na)
+        w = hypot(s[i, 2] - s[i, 0], s[i, 3] - s[i, 1])
+        m00 += w * pr * pr
+        m01 += w * pr * qr
+        m11 += w * qr * qr
+    if not (seen1 and seen2):
+        return False
+    # The eigenvector of [[m00, m01], [m01, m11]] with the smaller eigenvalue: (cos ψ, sin ψ).
+    lam = 0.5 * (m00 + m11) - hypot(0.5 * (m00 - m11), m01)
+    x, y = m01, lam - m00
+    x2, y2 = lam - m11, m01
+    if hypot(x2, y2) > hypot(x, y):
+        x, y = x2, y2
+    nrm = hypot(x, y)
+    if nrm < 1e-15:  # isotropic: every ψ fits alike
+        return False
+    x /= nrm
+    y /= nrm
+    for k in range(3):
+        d[k] = x * a[k] + y * b[k]
+    pixel_point(fr.f, fr.cx, fr.cy, d, d)
+    if dot3(d, o1) < 0:
+        for k in range(3):
+            d[k] = -d[k]
+    for k in range(3):
+        o1[k] = d[k]
+        d[k] = -y * a[k] + x * b[k]
+    pixel_point(fr.f, fr.cx, fr.cy, d, d)
+    if dot3(d, o2) < 0:
+        for k in range(3):
+            d[k] = -d[k]
+    for k in range(3):
+        o2[k] = d[k]
+    return True
+
+
+def fit_box_ovps(segments, ovps, layout_vps, double focal, double cx, double cy,
+                 double max_angle_deg):
+    """:func:`box_ovps_fit` over all ``segments`` (N×4) from ``ovps`` (2×3); 2×3 or None."""
+    cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
+    cdef double[:, ::1] lines = np.empty((s.shape[0], 3))
+    cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
+    cdef double[:, ::1] out = np.array(ovps, dtype=float).reshape(2, 3)
+    cdef Py_ssize_t i
+    for i in range(s.shape[0]):
+        segment_line(s[i, 0], s[i, 1], s[i, 2], s[i, 3], &lines[i, 0])
+    cdef Frame fr
+    fr.f, fr.cx, fr.cy = focal, cx, cy
+    direction_of(&fr, &vps[2, 0], fr.d3)
+    if not box_ovps_fit(&fr, s, lines, list(range(s.shape[0])),
+                        sin(radians(max_angle_deg)), &out[0, 0], &out[1, 0]):
+        return None
+    return np.asarray(out)
+
+
 cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                     list members, Hypotheses* found, double[:, ::1] pc, long long[::1] cs,
                     long long[::1] cn, const double* v3_px):
@@ -777,6 +870,8 @@ cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines
         for k in range(3):
             o1[k] = ref1[k]
             o2[k] = ref2[k]
+    if p.box_fit:
+        box_ovps_fit(fr, s, lines, legs, sin(radians(refit_deg)), o1, o2)
     # Further Table-I corners whose legs point at O1 and O2 join the obstacle (λ3).
     joined = list(paired)
     if paired:
@@ -818,6 +913,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.merge_deg = params.merge_deg
     p.member_angle_deg = params.member_angle_deg
     p.refit_slack_deg = params.refit_slack_deg
+    p.box_fit = params.box_fit
     p.radius_px = radius_px
     p.leg_gap_frac = leg_gap_frac
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)

@@ -16,7 +16,9 @@ a rotated box standing on the floor. It is accepted when
   the orthogonality error, in degrees.
 
 Pairs that share their OVPs (within ``merge_deg``) are one obstacle, and further corners
-whose legs pass through those OVPs join it (the paper's use of λ3 across corners).
+whose legs pass through those OVPs join it (the paper's use of λ3 across corners). Its
+OVPs are then fitted to all its horizontal edges at once as one box's yaw about the
+vertical (:func:`fit_box_ovps`): eq. 8 with λ3 = 0, given the focal length.
 """
 
 from __future__ import annotations
@@ -27,10 +29,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.vision._obstacles import find
+from companion.vision._obstacles import fit_box_ovps as _fit_box_ovps
 from companion.vision.corners import Corners
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs
 
-__all__ = ["ObstacleParams", "Obstacle", "find_obstacles"]
+__all__ = ["ObstacleParams", "Obstacle", "find_obstacles", "fit_box_ovps"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,7 @@ class ObstacleParams:
     merge_deg: float = 3.0  # pairs whose OVPs agree this well are one obstacle
     member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well
     refit_slack_deg: float = 2.0  # an OVP refit at most this farther from horizontal/orthogonal
+    box_fit: bool = True  # OVPs fitted as one box's yaw about V3 (fit_box_ovps)
 
 
 @dataclass(frozen=True)
@@ -105,3 +109,27 @@ def find_obstacles(
     obstacles = [Obstacle(*fields) for fields in found]
     obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles
+
+
+
+def fit_box_ovps(legs: np.ndarray, ovps: np.ndarray, layout: LayoutVPs,
+                 max_angle_deg: float = 9.0) -> np.ndarray | None:
+    """O1 and O2 of one box standing on the floor, fitted to all its horizontal edges.
+
+    A box's horizontal edges run along two directions that are horizontal (⟂ V3) and at a
+    right angle to each other (eq. 8 with λ3 = 0), so given the focal length the two OVPs
+    have one degree of freedom between them: the box's yaw ψ about the vertical. Each edge
+    pointing at ``ovps[k]`` within ``max_angle_deg`` constrains ψ through the plane it
+    spans with the camera centre (normal ``n = Kᵀ l``): ``n · d_k(ψ) = 0``. Minimising
+    ``Σ w (n · d_k(ψ))²`` over ψ, with ``w`` the edge's length, is the smallest
+    eigenvector of a 2×2 matrix. Two nearly parallel edges of one face fix their own OVP
+    poorly (a small error moves it far along and off the horizon); tied to the horizon
+    and to the other face's edges it moves only along the horizon, and only as far as
+    all edges allow.
+
+    Inputs: ``legs`` M×4 segments (pixels), ``ovps`` 2×3 the current O1, O2 (homogeneous
+    pixels), ``layout`` with V3 and the focal length. Returns 2×3 unit homogeneous O1, O2
+    (same order), or None when either OVP has no edge to rest on.
+    """
+    return _fit_box_ovps(legs, ovps, layout.vps, layout.focal_px, layout.centre[0],
+                         layout.centre[1], max_angle_deg)
