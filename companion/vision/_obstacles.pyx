@@ -731,6 +731,35 @@ cdef void refit_ovp(double[:, ::1] s, double[:, ::1] lines, list legs, const dou
     out[0], out[1], out[2] = vp[0], vp[1], vp[2]
 
 
+cdef bint smallest_2x2(double m00, double m01, double m11, double* x, double* y) noexcept nogil:
+    """Unit eigenvector (x, y) of the symmetric [[m00, m01], [m01, m11]] with the smaller
+    eigenvalue; False when both eigenvalues are equal (every direction fits alike)."""
+    cdef double lam = 0.5 * (m00 + m11) - hypot(0.5 * (m00 - m11), m01)
+    cdef double ax = m01, ay = lam - m00, bx = lam - m11, by = m01, nrm
+    if hypot(bx, by) > hypot(ax, ay):
+        ax, ay = bx, by
+    nrm = hypot(ax, ay)
+    if nrm < 1e-15:
+        return False
+    x[0], y[0] = ax / nrm, ay / nrm
+    return True
+
+
+cdef void set_horizontal(Frame* fr, const double* a, const double* b, double x, double y,
+                         double* o) noexcept nogil:
+    """``o`` ← the image of the horizontal direction ``x a + y b``, on ``o``'s side."""
+    cdef double d[3]
+    cdef int k
+    for k in range(3):
+        d[k] = x * a[k] + y * b[k]
+    pixel_point(fr.f, fr.cx, fr.cy, d, d)
+    if dot3(d, o) < 0:
+        for k in range(3):
+            d[k] = -d[k]
+    for k in range(3):
+        o[k] = d[k]
+
+
 cdef bint box_ovps_fit(Frame* fr, double[:, ::1] s, double[:, ::1] lines, list legs,
                        double max_sin, double* o1, double* o2) noexcept:
     """O1, O2 refit in place as one box's yaw ψ about V3 (see
@@ -739,11 +768,15 @@ cdef bint box_ovps_fit(Frame* fr, double[:, ::1] s, double[:, ::1] lines, list l
     cdef double a[3]
     cdef double b[3]
     cdef double n[3]
-    cdef double d[3]
-    cdef double up_a, na, nb, pr, qr, w, lam, x, y, x2, y2, nrm
-    cdef double m00 = 0.0, m01 = 0.0, m11 = 0.0
-    cdef bint seen1 = False, seen2 = False, first
+    cdef double up_a, na, nb, w, x, y
+    # Σ w (n·a, n·b)ᵀ(n·a, n·b) over the legs of O1 (m1) and of O2 (m2).
+    cdef double m1[3]
+    cdef double m2[3]
+    cdef double* m
+    cdef bint seen1 = False, seen2 = False
     cdef Py_ssize_t i, k
+    for k in range(3):
+        m1[k] = m2[k] = 0.0
     direction_of(fr, o1, a)
     up_a = dot3(a, fr.d3)
     for k in range(3):
@@ -753,53 +786,29 @@ cdef bint box_ovps_fit(Frame* fr, double[:, ::1] s, double[:, ::1] lines, list l
     cross3(fr.d3, a, b)
     for i in legs:
         if vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o1) <= max_sin:
-            first = True
-            seen1 = True
+            m, seen1 = m1, True
         elif vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o2) <= max_sin:
-            first = False
-            seen2 = True
+            m, seen2 = m2, True
         else:
             continue
-        # The plane through the camera centre and the leg: normal Kᵀ l.
+        # The plane through the camera centre and the leg: normal Kᵀ l; a horizontal
+        # direction d = x a + y b lies in it when x (n·a) + y (n·b) = 0.
         n[0] = fr.f * lines[i, 0]
         n[1] = fr.f * lines[i, 1]
         n[2] = fr.cx * lines[i, 0] + fr.cy * lines[i, 1] + lines[i, 2]
         unit3(n)
         na, nb = dot3(n, a), dot3(n, b)
-        # d1(ψ) = cos ψ a + sin ψ b, d2(ψ) = −sin ψ a + cos ψ b: n·d = pr cos ψ + qr sin ψ.
-        pr, qr = (na, nb) if first else (nb, -na)
         w = hypot(s[i, 2] - s[i, 0], s[i, 3] - s[i, 1])
-        m00 += w * pr * pr
-        m01 += w * pr * qr
-        m11 += w * qr * qr
+        m[0] += w * na * na
+        m[1] += w * na * nb
+        m[2] += w * nb * nb
     if not (seen1 and seen2):
         return False
-    # The eigenvector of [[m00, m01], [m01, m11]] with the smaller eigenvalue: (cos ψ, sin ψ).
-    lam = 0.5 * (m00 + m11) - hypot(0.5 * (m00 - m11), m01)
-    x, y = m01, lam - m00
-    x2, y2 = lam - m11, m01
-    if hypot(x2, y2) > hypot(x, y):
-        x, y = x2, y2
-    nrm = hypot(x, y)
-    if nrm < 1e-15:  # isotropic: every ψ fits alike
+    # d1 = (x, y), d2 = (−y, x): O2's legs constrain (x, y) through (n·b, −n·a).
+    if not smallest_2x2(m1[0] + m2[2], m1[1] - m2[1], m1[2] + m2[0], &x, &y):
         return False
-    x /= nrm
-    y /= nrm
-    for k in range(3):
-        d[k] = x * a[k] + y * b[k]
-    pixel_point(fr.f, fr.cx, fr.cy, d, d)
-    if dot3(d, o1) < 0:
-        for k in range(3):
-            d[k] = -d[k]
-    for k in range(3):
-        o1[k] = d[k]
-        d[k] = -y * a[k] + x * b[k]
-    pixel_point(fr.f, fr.cx, fr.cy, d, d)
-    if dot3(d, o2) < 0:
-        for k in range(3):
-            d[k] = -d[k]
-    for k in range(3):
-        o2[k] = d[k]
+    set_horizontal(fr, a, b, x, y, o1)
+    set_horizontal(fr, a, b, -y, x, o2)
     return True
 
 
