@@ -246,29 +246,6 @@ cdef Py_ssize_t partner_legs(double[:, ::1] s, double[:, ::1] lines, double px, 
     return count
 
 
-cdef bint room_corner(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
-                      double[:, ::1] pc, Py_ssize_t g, double[:, ::1] far,
-                      double[::1] reach, Py_ssize_t[::1] room_idx, const double* d1,
-                      const double* d2, Py_ssize_t* buf) noexcept nogil:
-    """Whether the far end of corner ``g``'s vertical edge shows a leg that is V1/V2 beyond
-    doubt (``room_idx``) and points at neither OVP direction ``d1``, ``d2`` within
-    ``member_angle_deg``. A leg lying near the horizon points at every horizontal VP, so
-    only one the OVPs cannot explain says the edge belongs to something aligned."""
-    cdef double o1[3]
-    cdef double o2[3]
-    cdef double lim = sin(radians(p.member_angle_deg))
-    cdef Py_ssize_t k, i, nr = partner_legs(s, lines, pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
-                                           reach[g], -1, -1, room_idx, p, buf)
-    pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
-    pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
-    for k in range(nr):
-        i = buf[k]
-        if (vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o1) > lim
-                and vp_sin(s[i, 0], s[i, 1], s[i, 2], s[i, 3], o2) > lim):
-            return True
-    return False
-
-
 cdef bint partner_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t leg_s,
                        Py_ssize_t leg_n, const Py_ssize_t* hs, Py_ssize_t nh,
                        double* d1, double* d2, double* lam3) noexcept nogil:
@@ -977,9 +954,6 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     lab = np.asarray(labels)
     cdef Py_ssize_t[::1] verticals = np.flatnonzero(lab == vertical_label)
     cdef Py_ssize_t[::1] free_idx = np.flatnonzero(free_legs)
-    # Legs that are V1/V2 beyond doubt: the room's, or an aligned object's.
-    cdef Py_ssize_t[::1] room_idx = np.flatnonzero(~np.asarray(free_legs, dtype=bool)
-                                                   & (lab != vertical_label))
     cdef double[:, ::1] pc = np.ascontiguousarray(corner_points, dtype=float).reshape(-1, 2)
     cdef long long[::1] cs = np.ascontiguousarray(corner_s, dtype=np.int64)
     cdef long long[::1] cn = np.ascontiguousarray(corner_n, dtype=np.int64)
@@ -995,8 +969,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     cdef double[:, ::1] far = np.empty((max(nc, 1), 2))
     cdef double[::1] reach = np.empty(max(nc, 1))
     cdef unsigned char[::1] usable = np.zeros(max(nc, 1), np.uint8)
-    cdef Py_ssize_t* partners = <Py_ssize_t*>malloc(
-        max(free_idx.shape[0], room_idx.shape[0], 1) * sizeof(Py_ssize_t))
+    cdef Py_ssize_t* partners = <Py_ssize_t*>malloc(max(free_idx.shape[0], 1) * sizeof(Py_ssize_t))
     cdef double d1[3]
     cdef double d2[3]
     cdef double lam3
@@ -1011,15 +984,10 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                     continue
                 nh = partner_legs(s, lines, pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
                                   reach[g], cs[g], cn[g], free_idx, &p, partners)
-                # With no leg of C_h in sight, both OVPs where C_g's legs cross the horizon;
-                # unless the far end is a corner of the room's directions that those OVPs
-                # do not explain: then the edge is a door's or an aligned box's, and C_g's
-                # legs are a rug or a shadow meeting its end.
+                # With no leg of C_h in sight, both OVPs where C_g's legs cross the horizon.
                 if not (partner_ovps(&fr, &p, lines, cs[g], cn[g], partners, nh, d1, d2, &lam3)
-                        or (reach[g] >= 2 * p.min_edge_px
-                            and horizon_ovps(&fr, &p, lines, cs[g], cn[g], d1, d2, &lam3)
-                            and not room_corner(&fr, &p, s, lines, pc, g, far, reach,
-                                                room_idx, d1, d2, partners))):
+                        or (reach[g] >= 2 * p.min_edge_px and horizon_ovps(
+                            &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3))):
                     continue
                 h = new_hypothesis(&found)
                 set_ovps(h, d1, d2, lam3, reach[g])
