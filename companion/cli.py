@@ -149,7 +149,7 @@ def dry_run(args) -> int:
     """Pipeline + policy on every frame of ``args.video``; prints a summary."""
     import cv2
 
-    from companion.control.policy import TurnHistory, confirm_reversal, decide_turn, steering_eta
+    from companion.control.policy import TurnHistory, decide_frame
     from companion.report import DecisionLog, Summary, annotate, log_record
     from companion.vision.pipeline import Pipeline
 
@@ -189,9 +189,8 @@ def dry_run(args) -> int:
         for frame in video:
             t0 = time.perf_counter()
             est = pipeline(frame.image)
-            cmd, history = confirm_reversal(
-                decide_turn(steering_eta(est.eta_deg, est.eta_tracked_deg, cfg.policy),
-                            cfg.policy, est.scene_understood, est.range_m), history)
+            _, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, cfg.policy,
+                                           history, est.scene_understood, est.range_m)
             latency_ms = (time.perf_counter() - t0) * 1e3
             summary.add(est, latency_ms)
             if log:

@@ -35,7 +35,7 @@ from companion.capture import LatestFrame, is_camera, open_source
 from companion.config import Config
 from companion.control.obstacle_distance import from_estimate
 from companion.control.offboard import AutopilotNotFound, OffboardController
-from companion.control.policy import TurnHistory, confirm_reversal, decide_turn, steering_eta
+from companion.control.policy import TurnHistory, decide_frame
 from companion.notify import notify
 from companion.report import log_record
 from companion.vision.pipeline import Pipeline
@@ -89,9 +89,8 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
                 return
             continue
         est = pipeline(frame.image, camera_height_m=controller.camera_height_m())
-        eta = steering_eta(est.eta_deg, est.eta_tracked_deg, config.policy)
-        cmd, history = confirm_reversal(
-            decide_turn(eta, config.policy, est.scene_understood, est.range_m), history)
+        eta, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, config.policy,
+                                         history, est.scene_understood, est.range_m)
         controller.submit(cmd, eta, t_s=frame.captured_s,
                           obstacle_distance=from_estimate(
                               est, config.mavlink.obstacle_distance_increment_deg),

@@ -58,13 +58,7 @@ import cv2
 import numpy as np
 
 from companion.config import Config, MavlinkConfig
-from companion.control.policy import (
-    TurnHistory,
-    confirm_reversal,
-    decide_turn,
-    steering_eta,
-    wrap_deg,
-)
+from companion.control.policy import TurnHistory, decide_frame, wrap_deg
 from sitl.scene import (
     Box,
     Camera,
@@ -400,9 +394,10 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                           pitch_deg=pose.pitch_deg, roll_deg=pose.roll_deg)
             image = render_image(scene, cam, supersample=1) if policy == "paper" else None
             t0 = time.perf_counter()  # the frame is taken: decide
-            eta, understood, range_m, path_m = _observe(policy, scene, cam, pipeline, image)
-            cmd, history = confirm_reversal(decide_turn(eta, cfg.policy, understood, range_m),
-                                            history)
+            seen, tracked, understood, range_m, path_m = _observe(policy, scene, cam, pipeline,
+                                                                  image)
+            eta, cmd, history = decide_frame(seen, tracked, cfg.policy, history, understood,
+                                             range_m)
             t_frame = controller.clock()
             t_wall = time.monotonic()
             result.decision_ms.append((time.perf_counter() - t0) * 1e3)
@@ -429,21 +424,20 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
 
 
 def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None
-             ) -> tuple[float | None, bool, float | None, float | None]:
-    """η (or None), whether the scene was understood, and the range and path distance
-    (:class:`~companion.control.supervisor.Decision`), as the policy sees the frame
-    (``image``: the rendered frame, for ``paper``, measured at the camera height the
-    autopilot reports, as the service does). The oracle knows no range."""
+             ) -> tuple[float | None, float | None, bool, float | None, float | None]:
+    """η and the tracked η (or None), whether the scene was understood, and the range and
+    path distance (:class:`~companion.control.supervisor.Decision`), as the policy sees the
+    frame (``image``: the rendered frame, for ``paper``, measured at the camera height the
+    autopilot reports, as the service does). The oracle knows no range and tracks
+    nothing."""
     if policy == "paper":
         est = pipeline(image, camera_height_m=cam.height_m)
-        policy_cfg = pipeline.config.policy
-        eta = steering_eta(est.eta_deg, est.eta_tracked_deg, policy_cfg)
-        return (eta, est.scene_understood, est.range_m,
-                est.path_m(policy_cfg.path_half_width_m))
+        return (est.eta_deg, est.eta_tracked_deg, est.scene_understood, est.range_m,
+                est.path_m(pipeline.config.policy.path_half_width_m))
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
-        return (truth.eta_deg if truth.corners_px else None), True, None, None
-    return None, True, None, None
+        return (truth.eta_deg if truth.corners_px else None), None, True, None, None
+    return None, None, True, None, None
 
 
 def _round(x: float | None) -> float | str | None:

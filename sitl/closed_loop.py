@@ -32,7 +32,7 @@ import numpy as np
 
 from companion.config import Config, MavlinkConfig
 from companion.control.offboard import OffboardController
-from companion.control.policy import TurnHistory, confirm_reversal, decide_turn
+from companion.control.policy import TurnHistory, decide_frame
 from companion.vision.pipeline import Pipeline
 from sitl.scene import EAST, NORTH, WEST, Box, Camera, Room, Scene, WallRect, render
 
@@ -198,9 +198,9 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
                                           supersample=1)
                 t_cap = time.monotonic()
                 est = pipeline(image)
-                cmd, history = confirm_reversal(
-                    decide_turn(est.eta_deg, cfg.policy, est.scene_understood), history)
-                controller.submit(cmd, est.eta_deg, t_s=t_cap)
+                eta, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, cfg.policy,
+                                                 history, est.scene_understood)
+                controller.submit(cmd, eta, t_s=t_cap)
                 time.sleep(max(0.0, t_cap + frame_period_s - time.monotonic()))
                 if controller.state.name != "active":
                     if t_first:  # released after it was active: the run is over

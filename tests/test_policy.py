@@ -103,3 +103,28 @@ def test_steering_eta_is_the_frames_unless_a_confirmed_track_is_asked_for():
     assert steering_eta(44.0, -46.0, tracked) == -46.0  # the track's face, held
     assert steering_eta(12.0, None, tracked) == 12.0  # no confirmed track yet
     assert steering_eta(None, 20.0, tracked) == 20.0  # a dropout bridged by the track
+
+
+def test_decide_frame_steers_by_the_track_only_when_asked_and_confirms_reversals():
+    from companion.control.policy import TurnHistory, decide_frame
+
+    per_frame = PolicyConfig()
+    by_track = PolicyConfig(steer_by_track=True)
+    # The frame says left, the confirmed track says right.
+    eta, cmd, _ = decide_frame(-20.0, 25.0, per_frame, TurnHistory())
+    assert (eta, cmd.action) == (-20.0, "left")
+    eta, cmd, _ = decide_frame(-20.0, 25.0, by_track, TurnHistory())
+    assert (eta, cmd.action) == (25.0, "right")
+    eta, cmd, _ = decide_frame(-20.0, None, by_track, TurnHistory())  # no track yet
+    assert (eta, cmd.action) == (-20.0, "left")
+    # After a right turn, a left is flown only on the second frame asking for it.
+    history = TurnHistory()
+    actions = []
+    for frame_eta in (20.0, -20.0, -20.0):
+        _, cmd, history = decide_frame(frame_eta, None, per_frame, history)
+        actions.append(cmd.action)
+    assert actions == ["right", "forward", "left"]
+    # Range and scene understanding reach Table II.
+    far = PolicyConfig(act_within_m=6.0)
+    assert decide_frame(-20.0, None, far, TurnHistory(), range_m=9.0)[1].action == "forward"
+    assert decide_frame(-20.0, None, far, TurnHistory(), False)[1].action == "hold"

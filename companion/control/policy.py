@@ -48,7 +48,8 @@ from typing import Literal
 from companion.config import PolicyConfig
 
 __all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
-           "decide_turn", "heading_rate", "obstacle_matters", "path_speed_scale",
+           "decide_frame", "decide_turn", "heading_rate", "obstacle_matters",
+           "path_speed_scale",
            "steering_eta", "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
@@ -172,3 +173,17 @@ def confirm_reversal(command: TurnCommand, history: TurnHistory
         command = TurnCommand("forward", 0.0, 0.0)
     turned = command.action if command.action in ("left", "right") else history.last_turn
     return command, TurnHistory(last_turn=turned, previous=asked)
+
+
+def decide_frame(eta_deg: float | None, eta_tracked_deg: float | None, policy: PolicyConfig,
+                 history: TurnHistory, scene_understood: bool = True,
+                 range_m: float | None = None
+                 ) -> tuple[float | None, TurnCommand, TurnHistory]:
+    """One frame's decision, as every caller makes it: the η to steer by
+    (:func:`steering_eta`), Table II on it (:func:`decide_turn`), then the reversal rule
+    (:func:`confirm_reversal`). Returns that η, the command and the history for the next
+    frame."""
+    eta = steering_eta(eta_deg, eta_tracked_deg, policy)
+    command, history = confirm_reversal(decide_turn(eta, policy, scene_understood, range_m),
+                                        history)
+    return eta, command, history
