@@ -49,8 +49,7 @@ from companion.config import PolicyConfig
 
 __all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
            "decide_frame", "decide_turn", "heading_rate", "obstacle_matters",
-           "path_speed_scale",
-           "steering_eta", "wrap_deg"]
+           "path_speed_scale", "steering_eta", "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
 

@@ -111,7 +111,6 @@ def find_obstacles(
     return obstacles
 
 
-
 def fit_box_ovps(legs: np.ndarray, ovps: np.ndarray, layout: LayoutVPs,
                  max_angle_deg: float = 9.0) -> np.ndarray | None:
     """O1 and O2 of one box standing on the floor, fitted to all its horizontal edges.
