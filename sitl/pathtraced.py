@@ -31,6 +31,8 @@ drone. ``render`` takes about 1.3 s at 640×480 and 16 samples per pixel on one 
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from dataclasses import dataclass, field, replace
 
 import cv2
@@ -55,7 +57,7 @@ from sitl.scene import (
 __all__ = ["Furniture", "Look", "Room3D", "random_room", "render", "truth", "available", "KINDS",
            "VERSION"]
 
-VERSION = 1
+VERSION = 2
 """bumped whenever a change alters the pictures: cached renders of another version are not reused"""
 KINDS = ("box", "table", "cabinet", "sofa")
 MAX_DEPTH = 3
@@ -281,17 +283,47 @@ def _bsdf(mi, texture: np.ndarray | None = None, rgb=None, gloss: float = 0.0,
     return {"type": "twosided", "material": inner}
 
 
-def _rect(mi, centre, u, v, hu, hv, bsdf=None, emit=None) -> dict:
+def _rect(mi, centre, u, v, hu, hv, bsdf) -> dict:
     """A rectangle: ``u``, ``v`` unit NED axes, half sizes; its normal is u × v."""
     n = np.cross(u, v)
-    shape = {"type": "rectangle",
-             "to_world": _transform(mi, np.column_stack([u * hu, v * hv, n]), np.asarray(centre))}
-    if emit is not None:
-        shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": emit}}
-        shape["bsdf"] = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0] * 3}}
-    else:
-        shape["bsdf"] = bsdf
-    return shape
+    return {"type": "rectangle", "bsdf": bsdf,
+            "to_world": _transform(mi, np.column_stack([u * hu, v * hv, n]), np.asarray(centre))}
+
+
+def _lights(mi, panels: list[tuple], folder: str) -> dict:
+    """Every light as one mesh, hence one emitter: ``panels`` are (centre, u, v, hu, hv,
+    radiance RGB) rectangles, as :func:`_rect`, each emitting along u × v. The mesh is
+    written to ``folder`` as PLY, which Mitsuba reads back as it reads any mesh.
+
+    Mitsuba picks the emitter to sample by its index, and a scene's emitters come in a
+    different order from one load to the next: with several, the same scene and seed
+    rendered to different pictures (95 % of the pixels, by up to 100 grey levels), and a
+    frozen split's figures changed with every fresh cache. Each panel's radiance is a texel
+    of a one-row texture that its texture coordinates cover (Mitsuba samples a textured
+    emitter through its texture, then maps the sample back onto the mesh).
+    """
+    k = len(panels)
+    mesh = mi.Mesh("lights", 4 * k, 2 * k, has_vertex_texcoords=True)
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
+    vertices, uvs, faces = [], [], []
+    for i, (centre, u, v, hu, hv, _) in enumerate(panels):
+        for cu, cv in corners:  # counter-clockwise about u × v: the face normal
+            vertices.append(_TO_MI @ (np.asarray(centre) + cu * hu * u + cv * hv * v))
+            uvs.append([(i + (cu + 1) / 2) / k, (cv + 1) / 2])
+        faces += [[4 * i, 4 * i + 1, 4 * i + 2], [4 * i, 4 * i + 2, 4 * i + 3]]
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = np.ravel(vertices).astype(np.float32)
+    params["vertex_texcoords"] = np.ravel(uvs).astype(np.float32)
+    params["faces"] = np.ravel(faces).astype(np.uint32)
+    params.update()
+    path = os.path.join(folder, "lights.ply")
+    mesh.write_ply(path)
+    texels = np.array([[p[5] for p in panels]], dtype=np.float32)
+    return {"type": "ply", "filename": path, "face_normals": True,
+            "emitter": {"type": "area", "radiance": {
+                "type": "bitmap", "bitmap": mi.Bitmap(texels), "filter_type": "nearest",
+                "raw": True}},
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0] * 3}}}
 
 
 def _cube(mi, centre, a: np.ndarray, b: np.ndarray, half, bsdf) -> dict:
@@ -312,7 +344,7 @@ def _wall_frame(room: Room, wall: int):
     return np.array([room.x_min, room.y_min, 0.0]), ex, ey
 
 
-def _scene_dict(mi, r3: Room3D, cam: Camera) -> dict:
+def _scene_dict(mi, r3: Room3D, cam: Camera, folder: str) -> dict:
     room, look = r3.room, r3.look
     rng = np.random.default_rng(look.seed)
     cx, cy = (room.x_min + room.x_max) / 2, (room.y_min + room.y_max) / 2
@@ -375,12 +407,13 @@ def _scene_dict(mi, r3: Room3D, cam: Camera) -> dict:
 
     # Lights: ceiling panels, and daylight through a window.
     nx, ny = (2, 1) if lx > ly else (1, 2)
+    panels: list[tuple] = []
     for i in range(nx):
         for j in range(ny):
             px = room.x_min + lx * (i + 0.5) / nx
             py = room.y_min + ly * (j + 0.5) / ny
-            d[f"lamp{i}{j}"] = _rect(mi, [px, py, -h + 0.01], ex, ey, 0.3, 0.3,
-                                     emit=[look.lamp_power] * 3)  # ex × ey: faces down
+            panels.append(([px, py, -h + 0.01], ex, ey, 0.3, 0.3,  # ex × ey: faces down
+                           [look.lamp_power] * 3))
     if look.window_power > 0:
         windows = [r for r in room.decorations if r.bottom > 0.5 and r.tilt_deg == 0]
         if windows:
@@ -391,8 +424,10 @@ def _scene_dict(mi, r3: Room3D, cam: Camera) -> dict:
             u, v = (along, UP) if np.dot(np.cross(along, UP), inward) > 0 else (UP, along)
             hu, hv = ((w.width / 2, (w.top - w.bottom) / 2) if u is along
                       else ((w.top - w.bottom) / 2, w.width / 2))
-            d["window"] = _rect(mi, centre, u, v, hu, hv,
-                                emit=[look.window_power * c for c in (0.95, 1.0, 1.1)])
+            panels.append((centre, u, v, hu, hv,
+                           [look.window_power * c for c in (0.95, 1.0, 1.1)]))
+
+    d["lights"] = _lights(mi, panels, folder)
 
     # Furniture.
     for k, f in enumerate(r3.furniture):
@@ -505,7 +540,8 @@ def truth(r3: Room3D, cam: Camera) -> SceneTruth:
 def render(r3: Room3D, cam: Camera) -> tuple[np.ndarray, SceneTruth]:
     """Path-trace ``r3`` as ``cam`` sees it: (H×W×3 uint8 BGR, :class:`SceneTruth`)."""
     mi = _mi()
-    scene = mi.load_dict(_scene_dict(mi, r3, cam))
+    with tempfile.TemporaryDirectory(prefix="companion-") as folder:
+        scene = mi.load_dict(_scene_dict(mi, r3, cam, folder))
     linear = np.array(mi.render(scene, spp=r3.look.spp, seed=r3.look.seed))
     return develop(linear[..., :3], cam, r3.look), truth(r3, cam)
 
