@@ -61,6 +61,7 @@ class VisionConfig:
     min_segment_frac: float = field(default=0.02, metadata=_range(0.001, 0.5))
     max_segments: int = field(default=300, metadata=_range(10, 5000))
     edge_threshold: float = field(default=20.0, metadata=_range(1.0, 255.0))
+    validate_segments: bool = False
     vanishing: VPParams = field(default_factory=VPParams)
     corners: CornerParams = field(default_factory=CornerParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)

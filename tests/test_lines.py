@@ -1,9 +1,15 @@
-"""Segment growing toward junctions (companion.vision.lines.extend_segments)."""
+"""Segment detection (a-contrario validation) and growing toward junctions
+(companion.vision.lines)."""
 
+from dataclasses import replace
+
+import cv2
 import numpy as np
 import pytest
 
-from companion.vision.lines import extend_segments
+from companion.config import Config
+from companion.vision.lines import extend_segments, make_detector
+from companion.vision.pipeline import Pipeline
 
 
 def _rectangle(noise=3.0, seed=0):
@@ -14,6 +20,37 @@ def _rectangle(noise=3.0, seed=0):
     frame[60:180, 80:240] = 60.0
     frame += rng.normal(0.0, noise, frame.shape)
     return np.clip(frame, 0, 255).astype(np.uint8)
+
+
+def _noisy_step(seed=0):
+    # Sensor noise (σ 14 grey levels, lightly smoothed) over one vertical step edge at x = 159.5.
+    rng = np.random.default_rng(seed)
+    frame = rng.normal(128.0, 14.0, (240, 320))
+    frame[:, 160:] += 60.0
+    return cv2.GaussianBlur(np.clip(frame, 0, 255).astype(np.uint8), (3, 3), 0.8)
+
+
+def test_validation_flags_chance_segments_and_keeps_the_edge():
+    frame = _noisy_step()
+    segments, validated = make_detector("edlines", 8.0, 20.0, validate=True)(frame)
+    unflagged, every = make_detector("edlines", 8.0, 20.0)(frame)
+    assert np.array_equal(segments, unflagged) and every.all()  # one detection, flags added
+    on_edge = (np.abs(segments[:, 0] - 159.5) < 2) & (np.abs(segments[:, 2] - 159.5) < 2)
+    lengths = np.hypot(*(segments[:, 2:] - segments[:, :2]).T)
+    assert (lengths[on_edge & validated] > 200).any()  # the real edge, whole, validated
+    # Noise makes dozens of short segments; a handful at most pass the test.
+    assert len(segments) >= 30
+    assert np.count_nonzero(validated) <= len(segments) / 5
+
+
+def test_corners_are_built_from_validated_segments_and_the_layout_from_all():
+    frame = cv2.cvtColor(_noisy_step(), cv2.COLOR_GRAY2BGR)
+    cfg = Config()
+    pipeline = Pipeline(replace(cfg, vision=replace(cfg.vision, validate_segments=True)))
+    every = pipeline.segments(frame)
+    est = pipeline(frame)
+    assert len(every) >= 30  # the layout's input: every segment
+    assert 1 <= len(est.segments) <= len(every) / 5  # the corners': validated ones
 
 
 def test_a_segment_short_of_both_corners_grows_to_them():

@@ -20,7 +20,7 @@ from companion.vision.geometry import segment_lengths
 
 __all__ = ["DETECTORS", "make_detector", "to_gray", "filter_segments", "extend_segments"]
 
-Detector = Callable[[np.ndarray], np.ndarray]
+Detector = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def to_gray(frame: np.ndarray) -> np.ndarray:
@@ -32,49 +32,61 @@ def to_gray(frame: np.ndarray) -> np.ndarray:
     return frame if frame.dtype == np.uint8 else cv2.convertScaleAbs(frame)
 
 
-def _edlines(min_length_px: float, edge_threshold: float) -> Detector:
+def _edlines(min_length_px: float, edge_threshold: float, validate: bool = False) -> Detector:
     ed = cv2.ximgproc.createEdgeDrawing()
     params = cv2.ximgproc.EdgeDrawing.Params()
     params.MinLineLength = max(int(round(min_length_px)), 5)
     params.GradientThresholdValue = int(round(edge_threshold))
-    # No a-contrario (NFA) validation of the fitted lines: on the YUD train photographs it
-    # cost about 4 ms of 12 per image and bought 0.7 points of AA@3°; the chance segments
-    # it removes are short, and filter_segments keeps only the longest ones anyway.
     params.NFAValidation = False
-    ed.setParams(params)
+    ed.setParams(params)  # before the first detectEdges, which reads the threshold
 
-    def detect(gray: np.ndarray) -> np.ndarray:
-        ed.detectEdges(gray)
+    def lines(nfa: bool) -> np.ndarray:
+        params.NFAValidation = nfa
+        ed.setParams(params)
         found = ed.detectLines()
-        if found is None:
-            return np.empty((0, 4))
-        return np.asarray(found, dtype=float).reshape(-1, 4)
+        return np.empty((0, 4)) if found is None else np.asarray(found, float).reshape(-1, 4)
+
+    def detect(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ed.detectEdges(gray)
+        segments = lines(False)
+        if not validate:
+            return segments, np.ones(len(segments), bool)
+        # A-contrario validation (EDLines' NFA test) of the same edge chains: the lines
+        # it keeps are rows of the unvalidated ones, so refitting costs no edge detection.
+        kept = {row.tobytes() for row in lines(True)}
+        return segments, np.array([row.tobytes() in kept for row in segments], bool)
 
     return detect
 
 
-def _lsd(min_length_px: float, edge_threshold: float) -> Detector:  # noqa: ARG001
+def _lsd(min_length_px: float, edge_threshold: float,  # noqa: ARG001
+         validate: bool = False) -> Detector:  # noqa: ARG001
     lsd = cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD)
 
-    def detect(gray: np.ndarray) -> np.ndarray:
+    def detect(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         found = lsd.detect(gray)[0]
-        if found is None:
-            return np.empty((0, 4))
-        # OpenCV 4 returns N×1×4, OpenCV 5 N×4.
-        return np.asarray(found, dtype=float).reshape(-1, 4)
+        # OpenCV 4 returns N×1×4, OpenCV 5 N×4; LSD validates every segment itself.
+        segments = np.empty((0, 4)) if found is None else np.asarray(found, float).reshape(-1, 4)
+        return segments, np.ones(len(segments), bool)
 
     return detect
 
 
-DETECTORS: dict[str, Callable[[float, float], Detector]] = {"edlines": _edlines, "lsd": _lsd}
+DETECTORS: dict[str, Callable[[float, float, bool], Detector]] = {"edlines": _edlines,
+                                                                  "lsd": _lsd}
 
 
-def make_detector(name: str, min_length_px: float, edge_threshold: float = 20.0) -> Detector:
-    """A segment detector ``gray uint8 image → N×4 float array [x1, y1, x2, y2]``.
+def make_detector(name: str, min_length_px: float, edge_threshold: float = 20.0,
+                  validate: bool = False) -> Detector:
+    """A segment detector ``gray uint8 image → (N×4 float array [x1, y1, x2, y2], N bool)``:
+    the segments and which of them pass an a-contrario test.
 
     The detector object is built once and reused for every frame (building it is not
     free). ``name`` is one of :data:`DETECTORS`. ``edge_threshold`` is EDLines' gradient
-    threshold in grey levels (LSD sets its own from its noise model and ignores it).
+    threshold in grey levels. With ``validate`` each EDLines segment is put to its NFA test
+    (a line is kept only if so many of its pixels' gradients are aligned with it that chance
+    is an unlikely explanation), else every flag is True. LSD sets its threshold from its
+    own noise model and validates every segment itself; it ignores both.
     """
     try:
         factory = DETECTORS[name]
@@ -82,7 +94,7 @@ def make_detector(name: str, min_length_px: float, edge_threshold: float = 20.0)
         raise ValueError(
             f"unknown line detector {name!r}; choose from {sorted(DETECTORS)}"
         ) from None
-    return factory(min_length_px, edge_threshold)
+    return factory(min_length_px, edge_threshold, validate)
 
 
 def filter_segments(segments: np.ndarray, min_length_px: float, max_count: int) -> np.ndarray:

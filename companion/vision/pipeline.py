@@ -112,7 +112,8 @@ class Estimate:
     :func:`~companion.vision.obstacles.find_obstacles`), None if none.
     ``m_px``: its M in centred coordinates (y up), None if none or at infinity.
     ``obstacles``: every obstacle found, primary first. ``layout``: V1, V2, V3.
-    ``segments`` N×4 and ``labels`` N (V1 0, V2 1, V3 2, none −1); ``corners``: the
+    ``segments`` N×4, those corners are built from (validated, grown to their junctions),
+    and their ``labels`` N (V1 0, V2 1, V3 2, none −1); ``corners``: the
     top-K corner projections; ``obstacle_corners``: those passing Table I.
     ``stage_ms``: wall time per stage in milliseconds (keys :data:`STAGES`).
     ``focal_px``: the focal length the layout rests on, ``focal_source`` where it came from
@@ -204,7 +205,8 @@ class Pipeline:
         key = round(min_len, 1)
         if key not in self._detectors:
             self._detectors[key] = make_detector(self.config.vision.detector, min_len,
-                                                 self.config.vision.edge_threshold)
+                                                 self.config.vision.edge_threshold,
+                                                 self.config.vision.validate_segments)
         return self._detectors[key], min_len
 
     def _layout(self, segments: np.ndarray, w: int, h: int) -> tuple[LayoutVPs, str]:
@@ -279,12 +281,24 @@ class Pipeline:
 
     def segments(self, frame: np.ndarray) -> np.ndarray:
         """Stage 1: the frame's line segments (N×4 pixels), filtered and capped."""
-        return self._segments(to_gray(frame))
+        return self._segments(to_gray(frame))[0]
 
-    def _segments(self, gray: np.ndarray) -> np.ndarray:
+    def _segments(self, gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every segment, for the layout VPs, and those that pass the a-contrario test
+        (``vision.validate_segments``), for corners and obstacles; each filtered and capped.
+
+        The layout VPs are a vote of hundreds of segments, in which a chance segment is
+        one outlier among many and a faint true one still adds support; a corner is built
+        from two or three segments, and one chance segment is enough to make a wrong one.
+        """
         h, w = gray.shape[:2]
         detect, min_len = self.detector_for(w, h)
-        return filter_segments(detect(gray), min_len, self.config.vision.max_segments)
+        segments, validated = detect(gray)
+        cap = self.config.vision.max_segments
+        every = filter_segments(segments, min_len, cap)
+        if validated.all():
+            return every, every
+        return every, filter_segments(segments[validated], min_len, cap)
 
     def layout(self, frame: np.ndarray) -> tuple[LayoutVPs, str]:
         """Stages 1–2 alone, frame → layout VPs and the focal length's source (given,
@@ -319,11 +333,12 @@ class Pipeline:
 
         t0 = time.perf_counter()
         gray = to_gray(frame)
-        segments = self._segments(gray)
+        all_segments, segments = self._segments(gray)
         t1 = time.perf_counter()
         ms["lines"] = (t1 - t0) * 1e3
 
-        layout, focal_source = self._layout(segments, w, h)
+        # The layout rests on every segment, corners and obstacles on the validated ones.
+        layout, focal_source = self._layout(all_segments, w, h)
         labels, _ = assign_segments(segments, layout.vps, vc.vanishing)
         t2 = time.perf_counter()
         ms["vps"] = (t2 - t1) * 1e3
