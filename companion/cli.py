@@ -90,7 +90,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="with --renderer: give the pipeline the rendered focal length (a "
                          "diagnosis; the targets are without it)")
     ev.add_argument("--clips", action="store_true",
-                    help="with --renderer scene: per-frame and tracked η on yawing clips")
+                    help="with --renderer: per-frame and tracked η on yawing clips")
     ev.add_argument("--split", choices=("dev", "train", "test", "all"), default=None,
                     help="with --renderer: dev, test or all (default all); with --yud: train "
                          "(= dev), test (default) or all. Tune on dev/train only")
@@ -315,24 +315,27 @@ def run_eval_splits(args) -> int:
 def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
     from sitl.evaluate import clip_figures, format_clips, run_clips
 
-    if renderers != ("scene",):
-        raise UserError("--clips is measured on --renderer scene only")
-    by_split = {}
-    for s in splits:
-        progress = _Progress(True)
-        try:
-            by_split[s] = run_clips(s, cfg, args.workers,
-                                    lambda d, t, p=progress, s=s: p.update(d, t, f"clips {s}"))
-        finally:
-            progress.close()
-    for line in format_clips(by_split):
-        print(line)
-    print(f"({time.perf_counter() - start:.0f} s; companion eval --renderer scene --clips"
-          + (f" --split {splits[0]})" if len(splits) == 1 else ")"))
+    figures = {}
+    for renderer in renderers:
+        by_split = {}
+        for s in splits:
+            progress = _Progress(True)
+            try:
+                by_split[s] = run_clips(s, cfg, args.workers,
+                                        lambda d, t, p=progress, r=renderer, s=s: p.update(
+                                            d, t, f"{r} clips {s}"), renderer=renderer)
+            finally:
+                progress.close()
+        for line in format_clips(by_split, renderer):
+            print(line)
+        figures[renderer] = {s: {"per_frame": clip_figures(fr, False),
+                                 "tracked": clip_figures(fr, True)}
+                             for s, fr in by_split.items()}
+    print(f"({time.perf_counter() - start:.0f} s; companion eval --renderer {args.renderer}"
+          " --clips" + (f" --split {splits[0]})" if len(splits) == 1 else ")"))
     if args.json:
         with _open_output(args.json, "figures") as f:
-            json.dump({s: {"per_frame": clip_figures(fr, False), "tracked": clip_figures(fr, True)}
-                       for s, fr in by_split.items()}, f, indent=2)
+            json.dump(figures, f, indent=2)
     return 0
 
 

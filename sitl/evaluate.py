@@ -193,6 +193,13 @@ def draw_scene(renderer: str, seed: int, index: int, obstacle_share: float = 0.7
     spp = 16 if width * height >= 640 * 480 else 32
     r3, cam = pathtraced.random_room(rng, width, height, obstacle=has_obstacle,
                                      hfov_deg=hfov_deg, spp=spp)
+    return _render_cached(path, r3, cam)
+
+
+def _render_cached(path: Path, r3, cam):
+    """A path-traced frame from the cache at ``path``, else rendered and cached there."""
+    from sitl import pathtraced
+
     image = cv2.imread(str(path), cv2.IMREAD_COLOR) if path.exists() else None
     if image is not None:  # the truth is cheap and always computed afresh
         return image, pathtraced.truth(r3, cam)
@@ -410,10 +417,17 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
     return lines
 
 
-CLIPS = {"dev": (0, 40), "test": (9001, 40)}
-"""(seed, clips) of the tracking evaluation's frozen splits (renderer ``scene``)."""
+CLIPS = {
+    ("scene", "dev"): (0, 40),
+    ("scene", "test"): (9001, 40),
+    ("pathtraced", "dev"): (21, 12),
+    ("pathtraced", "test"): (9021, 12),
+}
+"""(seed, clips) of each renderer's frozen tracking splits. Never tune on ``test``."""
 
 CLIP_FRAMES = 10
+CLIP_FPS = 10.0
+"""frame rate of a clip: the yaw between frames makes the motion blur within one"""
 
 
 @dataclass(frozen=True)
@@ -428,22 +442,35 @@ class FrameResult:
 
 
 def evaluate_clip(seed: int, clip: int, config: Config | None = None,
-                  obstacle_share: float = 0.7, frames: int = CLIP_FRAMES) -> list[FrameResult]:
-    """A clip: a random room (:func:`sitl.scene.random_scene`, 90° lens) seen while the
-    vehicle yaws at a steady 1–4° per frame either way and drifts forward; one pipeline
-    runs over its frames, focal length not given, as on a video."""
+                  obstacle_share: float = 0.7, frames: int = CLIP_FRAMES,
+                  renderer: str = "scene") -> list[FrameResult]:
+    """A clip: a random room seen while the vehicle yaws at a steady 1–4° per frame either
+    way and drifts forward; one pipeline runs over its frames, focal length not given, as
+    on a video. ``scene`` clips have a 90° lens; ``pathtraced`` ones the renderer's own
+    50–110°, with the motion blur of the clip's yaw rate at :data:`CLIP_FPS`."""
     from sitl.scene import yaw_sweep
 
     rng = np.random.default_rng([seed, clip])
     has_obstacle = bool(rng.random() < obstacle_share)
-    scene, cam = random_scene(rng, 640, 480, obstacle=has_obstacle, hfov_deg=90.0)
+    if renderer == "scene":
+        scene, cam = random_scene(rng, 640, 480, obstacle=has_obstacle, hfov_deg=90.0)
+    else:
+        from sitl import pathtraced
+
+        r3, cam = pathtraced.random_room(rng, 640, 480, obstacle=has_obstacle)
     rate = float(rng.uniform(1.0, 4.0) * rng.choice([-1, 1]))
     start = cam.yaw_deg - rate * frames / 2
     pipe = Pipeline(config or Config())
     out = []
     for k, c in enumerate(yaw_sweep(cam, start, start + rate * (frames - 1), frames,
                                     advance_m=float(rng.uniform(0.0, 0.6)))):
-        image, truth = render(replace(scene, seed=scene.seed + k), c)
+        if renderer == "scene":
+            image, truth = render(replace(scene, seed=scene.seed + k), c)
+        else:
+            look = replace(r3.look, seed=r3.look.seed + k, yaw_rate_deg_s=rate * CLIP_FPS)
+            path = (_cache_dir() / f"pathtraced-{pathtraced.VERSION}" / "clips"
+                    / f"{seed}-{clip}-{k}.png")
+            image, truth = _render_cached(path, replace(r3, look=look), c)
         est = pipe(image)
         targets = [o for o in truth.obstacles if o.non_manhattan]
         detectable = [o for o in targets if o.detectable]
@@ -461,14 +488,14 @@ def _clip_worker(args):
 
 
 def run_clips(split: str, config: Config | None = None, workers: int | None = None,
-              progress=None) -> list[FrameResult]:
-    """Every clip of a frozen tracking split (:data:`CLIPS`)."""
-    seed, clips = CLIPS[split]
+              progress=None, renderer: str = "scene") -> list[FrameResult]:
+    """Every clip of a renderer's frozen tracking split (:data:`CLIPS`)."""
+    seed, clips = CLIPS[(renderer, split)]
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
     out: list[FrameResult] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        for k, frames in enumerate(pool.map(_clip_worker,
-                                            [(seed, i, config) for i in range(clips)])):
+        jobs = [(seed, i, config, 0.7, CLIP_FRAMES, renderer) for i in range(clips)]
+        for k, frames in enumerate(pool.map(_clip_worker, jobs)):
             out.extend(frames)
             if progress:
                 progress(k + 1, clips)
@@ -502,8 +529,9 @@ def clip_figures(frames: list[FrameResult], tracked: bool) -> dict[str, float | 
     }
 
 
-def format_clips(by_split: dict[str, list[FrameResult]]) -> list[str]:
-    lines = ["tracking, renderer scene, 90° lens, focal length not given: "
+def format_clips(by_split: dict[str, list[FrameResult]], renderer: str = "scene") -> list[str]:
+    lens = "90° lens" if renderer == "scene" else "50–110° lenses"
+    lines = [f"tracking, renderer {renderer}, {lens}, focal length not given: "
              f"{CLIP_FRAMES}-frame yawing clips; η error modulo 90° (to the nearest face), "
              "sign✗ where 1° <= |η_truth| <= 40°",
              f"{'split':<5} {'η':<9} {'det %':>6} {'η med°':>7} {'η p90°':>7} {'FP %':>5} "

@@ -2,6 +2,7 @@
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 
@@ -74,3 +75,15 @@ def test_random_rooms_are_reproducible_and_varied():
     kinds = {f.kind for i in range(12)
              for f in random_room(np.random.default_rng([5, i]), 320, 240)[0].furniture}
     assert {"table", "cabinet", "sofa", "box"} <= kinds
+
+
+def test_a_pathtraced_clip_is_rendered_once_then_read_back(tmp_path, monkeypatch):
+    from sitl.evaluate import evaluate_clip
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    first = evaluate_clip(21, 0, frames=2, renderer="pathtraced")
+    frames = sorted(tmp_path.rglob("*.png"))
+    assert len(first) == 2 and len(frames) == 2
+    a, b = (cv2.imread(str(p)) for p in frames)
+    assert np.abs(a.astype(int) - b.astype(int)).mean() > 1.0  # the camera yawed
+    assert evaluate_clip(21, 0, frames=2, renderer="pathtraced") == first  # from the cache
