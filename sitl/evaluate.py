@@ -187,19 +187,20 @@ def draw_scene(renderer: str, seed: int, index: int, obstacle_share: float = 0.7
     from sitl import pathtraced
 
     fov = "any" if hfov_deg is None else f"{hfov_deg:g}"
-    path = (_cache_dir() / f"pathtraced-{pathtraced.VERSION}" / f"{width}x{height}-{fov}"
-            / f"{seed}-{index}-share{obstacle_share:g}.png")
+    name = f"{width}x{height}-{fov}/{seed}-{index}-share{obstacle_share:g}.png"
     # Small frames get more samples per pixel: the same light per unit of the scene.
     spp = 16 if width * height >= 640 * 480 else 32
     r3, cam = pathtraced.random_room(rng, width, height, obstacle=has_obstacle,
                                      hfov_deg=hfov_deg, spp=spp)
-    return _render_cached(path, r3, cam)
+    return _render_cached(name, r3, cam)
 
 
-def _render_cached(path: Path, r3, cam):
-    """A path-traced frame from the cache at ``path``, else rendered and cached there."""
+def _render_cached(name: str, r3, cam):
+    """A path-traced frame from the cache (``name`` under this renderer version's folder),
+    else rendered and cached there."""
     from sitl import pathtraced
 
+    path = _cache_dir() / f"pathtraced-{pathtraced.VERSION}" / name
     image = cv2.imread(str(path), cv2.IMREAD_COLOR) if path.exists() else None
     if image is not None:  # the truth is cheap and always computed afresh
         return image, pathtraced.truth(r3, cam)
@@ -468,9 +469,8 @@ def evaluate_clip(seed: int, clip: int, config: Config | None = None,
             image, truth = render(replace(scene, seed=scene.seed + k), c)
         else:
             look = replace(r3.look, seed=r3.look.seed + k, yaw_rate_deg_s=rate * CLIP_FPS)
-            path = (_cache_dir() / f"pathtraced-{pathtraced.VERSION}" / "clips"
-                    / f"{seed}-{clip}-{k}.png")
-            image, truth = _render_cached(path, replace(r3, look=look), c)
+            image, truth = _render_cached(f"clips/{seed}-{clip}-{k}.png",
+                                          replace(r3, look=look), c)
         est = pipe(image)
         targets = [o for o in truth.obstacles if o.non_manhattan]
         detectable = [o for o in targets if o.detectable]

@@ -41,8 +41,9 @@ def _edlines(min_length_px: float, edge_threshold: float, validate: bool = False
     ed.setParams(params)  # before the first detectEdges, which reads the threshold
 
     def lines(nfa: bool) -> np.ndarray:
-        params.NFAValidation = nfa
-        ed.setParams(params)
+        if params.NFAValidation != nfa:  # only a validating detector switches, each frame
+            params.NFAValidation = nfa
+            ed.setParams(params)
         found = ed.detectLines()
         return np.empty((0, 4)) if found is None else np.asarray(found, float).reshape(-1, 4)
 
