@@ -67,7 +67,7 @@ RENDERERS = ("scene", "pathtraced")
 SPLITS = {
     ("scene", "dev"): (0, 200),
     ("scene", "test"): (9001, 200),
-    ("pathtraced", "dev"): (11, 80),
+    ("pathtraced", "dev"): (11, 240),
     ("pathtraced", "test"): (9011, 80),
 }
 """(seed, scenes) of each renderer's frozen splits. Never tune on ``test``."""
