@@ -411,6 +411,54 @@ def test_a_rug_seen_along_its_diagonal_is_no_unseen_vertical_edge():
                               labels)) == 1
 
 
+def _bottom_of_box_with_unseen_front_edge(yaw_deg=35.0):
+    """A box 35° off the room, 4 m ahead, whose two faces are lit alike: of its bottom,
+    the two edges meeting at the near corner (no vertical edge shows there) and the outer
+    vertical edge standing at the far end of one of them; its top edges are not seen.
+    Returns the segments (legs, legs, vertical), their labels and the faces' directions."""
+    a = np.radians(yaw_deg)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.2, 1.2, 4.0])  # on the floor, 1.2 m below the camera
+    b, bu, bv, tu = _project([front, front + 0.8 * u, front + 0.8 * v,
+                              front + 0.8 * u + [0.0, -0.9, 0.0]])
+    segs = np.array([[*b, *bu], [*b, *bv], [*bu, *tu]])
+    return segs, np.array([NONE, NONE, V3]), (u, v)
+
+
+def test_a_box_corner_whose_own_edge_is_unseen_rests_on_the_outline_edge_of_a_leg():
+    from companion.vision.obstacles import ObstacleParams, find_obstacles
+
+    segs, labels, faces = _bottom_of_box_with_unseen_front_edge()
+    corners = find_corners(segs, labels)
+    assert len(corners) == 0  # no corner has its three legs
+    found = find_obstacles(segs, corners, _room_layout(), labels == NONE, labels)
+    assert len(found) == 1
+    dirs = direction_of(found[0].ovps[:2], F, C)
+    for face in faces:
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+    # The rule is what finds it.
+    off = ObstacleParams(hidden_edge_corners=False)
+    assert find_obstacles(segs, corners, _room_layout(), labels == NONE, labels, off) == []
+
+
+def test_a_rug_corner_beside_the_corner_of_a_manhattan_thing_is_no_box():
+    # The same lines as a rug's near corner, or a shadow's, whose leg ends at a door frame
+    # or an aligned box: a room edge (V1) also leaves that vertical edge's end.
+    from companion.vision.obstacles import find_obstacles
+
+    segs, labels, _ = _bottom_of_box_with_unseen_front_edge()
+    far = segs[0, 2:]  # the leg's end at the vertical edge
+    baseboard = [*far, *(far + [60.0, 0.0])]  # toward V1, at infinity along the image rows
+    with_room_edge = np.vstack([segs, baseboard])
+    labels_r = np.append(labels, V1)
+    assert find_obstacles(with_room_edge, find_corners(with_room_edge, labels_r), _room_layout(),
+                          labels_r == NONE, labels_r) == []
+    # The same room edge elsewhere changes nothing.
+    elsewhere = np.vstack([segs, [10.0, 400.0, 70.0, 400.0]])
+    assert len(find_obstacles(elsewhere, find_corners(elsewhere, labels_r), _room_layout(),
+                              labels_r == NONE, labels_r)) == 1
+
+
 def _face_of_rotated_box(yaw_deg=35.0):
     """One face of a tall box 4 m ahead, ``yaw_deg`` off the view: its two vertical edges
     and its top and bottom edges (the other face shows nothing). Returns the segments, the

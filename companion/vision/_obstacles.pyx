@@ -38,6 +38,7 @@ cdef struct Params:
     double member_angle_deg
     double refit_slack_deg
     bint box_fit
+    bint hidden_edge_corners
     double radius_px
     double leg_gap_frac
 
@@ -556,6 +557,65 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list ed
         h.npoints = 2
 
 
+cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
+                              double[::1] lengths, list edges, list junctions,
+                              Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
+    """Two legs meeting at a junction where no vertical edge shows, one of them running on
+    to a vertical edge at its far end: the near corner of a box whose two faces are lit
+    alike, and the box's outline edge. Each leg's OVP is where it crosses the horizon, as
+    for a single corner (``single_corner_orthogonal_tol_deg``).
+
+    A flat thing on the floor beside a vertical edge looks the same, and is told apart by
+    where the edge starts: at the junction itself it may be a rug's corner touching a door
+    frame (so it must be the leg's far end); where a room edge (V1, V2, in ``room_idx``)
+    also leaves it, the edge is the corner of a Manhattan thing (a door frame, an aligned
+    box) that a rug or a shadow only touches. Per junction, its first such pair."""
+    cdef double d1[3]
+    cdef double d2[3]
+    cdef double ortho, ex, ey, axx, axy
+    cdef Py_ssize_t a, b, leg, end, k, j
+    cdef bint room_corner
+    cdef Hypothesis* h
+    if not junctions or not edges:
+        return
+    # For each free leg, the vertical edges it leaves from: (chain, which end).
+    attached = {}
+    for chain, legs_a, legs_b in edges:
+        for end, legs in enumerate((legs_a, legs_b)):
+            for leg, _ in legs:
+                attached.setdefault(leg, []).append((chain, end))
+    for x, y, a, b in junctions:
+        for leg in (a, b):
+            if leg not in attached:
+                continue
+            for chain, end in attached[leg]:
+                ex, ey = (chain[0], chain[1]) if end == 0 else (chain[2], chain[3])
+                if hypot(ex - x, ey - y) <= 2 * p.radius_px:
+                    continue  # the edge starts at the junction itself
+                axx, axy = (chain[2] - chain[0]) / chain[4], (chain[3] - chain[1]) / chain[4]
+                room_corner = False
+                for j in range(room_idx.shape[0]):
+                    k = room_idx[j]
+                    if lengths[k] >= p.min_edge_px and end_distance(s, k, ex, ey) <= p.radius_px \
+                            and fabs(_side(s, k, ex, ey, axx, axy)) >= MIN_SIDE:
+                        room_corner = True
+                        break
+                if room_corner or not horizon_ovps(fr, p, lines, a, b, d1, d2, &ortho):
+                    continue
+                h = new_hypothesis(found)
+                set_ovps(h, d1, d2, ortho, chain[4])
+                h.legs[0], h.legs[1] = a, b
+                h.nlegs = 2
+                h.points[0], h.points[1] = x, y
+                for k in range(4):
+                    h.points[2 + k] = chain[k]
+                h.npoints = 3
+                break
+            else:
+                continue
+            break
+
+
 cdef list leg_junctions(double[:, ::1] s, double[:, ::1] lines, double[::1] lengths,
                         Py_ssize_t[::1] free_idx, double min_leg_sin, Params* p):
     """Two obstacle legs whose ends meet at their intersection, at least
@@ -923,6 +983,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.member_angle_deg = params.member_angle_deg
     p.refit_slack_deg = params.refit_slack_deg
     p.box_fit = params.box_fit
+    p.hidden_edge_corners = params.hidden_edge_corners
     p.radius_px = radius_px
     p.leg_gap_frac = leg_gap_frac
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
@@ -993,14 +1054,17 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 set_ovps(h, d1, d2, lam3, reach[g])
                 h.corner = g
         # Vertical edges the detector did not see, implied by leg junctions above each other.
-        junction_pairs(&fr, &p, s, lines, leg_junctions(s, lines, lengths, free_idx, min_leg_sin,
-                                                        &p), &vps[2, 0], &found)
+        junctions = leg_junctions(s, lines, lengths, free_idx, min_leg_sin, &p)
+        junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
         edges = edge_legs(s, lengths, lines, verticals, free_idx, &p)
         silhouette_halves(&fr, &p, lines, edges, &halves)
         pair_halves(&fr, &p, &halves, &found)
         if found.count == 0:
             edge_horizon_pairs(&fr, &p, lines, edges, &found)
+        if found.count == 0 and p.hidden_edge_corners:
+            junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions,
+                                np.flatnonzero((lab >= 0) & (lab != vertical_label)), &found)
         if found.count == 0 and room_seen:
             single_halves(&fr, &p, &halves, &found)
         if found.count == 0:

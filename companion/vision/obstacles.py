@@ -54,6 +54,8 @@ class ObstacleParams:
     member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well
     refit_slack_deg: float = 2.0  # an OVP refit at most this farther from horizontal/orthogonal
     box_fit: bool = True  # OVPs fitted as one box's yaw about V3 (fit_box_ovps)
+    hidden_edge_corners: bool = True  # two legs meeting where no vertical edge shows, one
+    # running on to a vertical edge: a box corner whose faces are lit alike
 
 
 @dataclass(frozen=True)
@@ -95,6 +97,10 @@ def find_obstacles(
     is the paper's pair; a leg of ``C_h`` that the line detector missed (a thin top face,
     low contrast against the wall) is replaced by the horizon: ``O = L^g ∩ horizon``.
     At least one OVP must come from two real edges (``L^g × L^h``), and λ3 (eq. 8) holds.
+    When no pair is found this way, boxes that show fewer corners are looked for: leg
+    junctions one above the other, vertical edges with a leg at each end, and (with
+    ``hidden_edge_corners``) two legs meeting where no vertical edge shows, one of them
+    running on to a vertical edge at its far end.
 
     Inputs: ``segments`` N×4 pixels; ``corners`` already filtered by Table I;
     ``layout`` the frame's layout VPs; ``free`` N bool, segments that may be obstacle
