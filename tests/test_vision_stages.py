@@ -443,20 +443,25 @@ def test_a_box_corner_whose_own_edge_is_unseen_rests_on_the_outline_edge_of_a_le
 
 def test_a_rug_corner_beside_the_corner_of_a_manhattan_thing_is_no_box():
     # The same lines as a rug's near corner, or a shadow's, whose leg ends at a door frame
-    # or an aligned box: a room edge (V1) also leaves that vertical edge's end.
+    # or an aligned box: a room edge leaves one end of that vertical edge.
     from companion.vision.obstacles import find_obstacles
 
-    segs, labels, _ = _bottom_of_box_with_unseen_front_edge()
-    far = segs[0, 2:]  # the leg's end at the vertical edge
-    baseboard = [*far, *(far + [60.0, 0.0])]  # toward V1, at infinity along the image rows
-    with_room_edge = np.vstack([segs, baseboard])
-    labels_r = np.append(labels, V1)
-    assert find_obstacles(with_room_edge, find_corners(with_room_edge, labels_r), _room_layout(),
-                          labels_r == NONE, labels_r) == []
-    # The same room edge elsewhere changes nothing.
-    elsewhere = np.vstack([segs, [10.0, 400.0, 70.0, 400.0]])
-    assert len(find_obstacles(elsewhere, find_corners(elsewhere, labels_r), _room_layout(),
-                              labels_r == NONE, labels_r)) == 1
+    segs, labels, (u, _) = _bottom_of_box_with_unseen_front_edge()
+    bottom, top = segs[2, :2], segs[2, 2:]
+
+    def found(extra, label):
+        more = np.vstack([segs, extra])
+        lab = np.append(labels, label)
+        return find_obstacles(more, find_corners(more, lab), _room_layout(), lab == NONE, lab)
+
+    assert found([*bottom, *(bottom + [60.0, 0.0])], V1) == []  # a baseboard, toward V1
+    toward_v2 = C - top  # V2 is straight ahead
+    assert found([*top, *(top + 40.0 * toward_v2 / np.linalg.norm(toward_v2))], V2) == []
+    # A room edge elsewhere changes nothing; nor does one that points at the box's own OVP
+    # (near the horizon the box's top edge may be labelled V1).
+    assert len(found([10.0, 400.0, 70.0, 400.0], V1)) == 1
+    top_front = _project([np.array([0.2, 0.3, 4.0])])[0]
+    assert len(found([*top, *top_front], V1)) == 1
 
 
 def _face_of_rotated_box(yaw_deg=35.0):

@@ -566,12 +566,16 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
     for a single corner (``single_corner_orthogonal_tol_deg``).
 
     A flat thing on the floor beside a vertical edge looks the same, and is told apart by
-    where the edge starts: at the junction itself it may be a rug's corner touching a door
-    frame (so it must be the leg's far end); where a room edge (V1, V2, in ``room_idx``)
-    also leaves it, the edge is the corner of a Manhattan thing (a door frame, an aligned
-    box) that a rug or a shadow only touches. Per junction, its first such pair."""
+    the edge: at the junction itself it may be a rug's corner touching a door frame (so it
+    must be at the leg's far end); where a room edge (V1, V2, in ``room_idx``) leaves
+    either of its ends, it is the edge of a Manhattan thing (a door frame, an aligned box)
+    that a rug or a shadow only touches. An edge labelled V1 or V2 that points at one of
+    the two OVPs is no such proof: near the horizon the box's own top edges are labelled
+    so. Per junction, its first such pair."""
     cdef double d1[3]
     cdef double d2[3]
+    cdef double o1[3]
+    cdef double o2[3]
     cdef double ortho, ex, ey, axx, axy
     cdef Py_ssize_t a, b, leg, end, k, j
     cdef bint room_corner
@@ -592,15 +596,31 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                 ex, ey = (chain[0], chain[1]) if end == 0 else (chain[2], chain[3])
                 if hypot(ex - x, ey - y) <= 2 * p.radius_px:
                     continue  # the edge starts at the junction itself
+                if not horizon_ovps(fr, p, lines, a, b, d1, d2, &ortho):
+                    continue
+                pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+                pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
                 axx, axy = (chain[2] - chain[0]) / chain[4], (chain[3] - chain[1]) / chain[4]
                 room_corner = False
                 for j in range(room_idx.shape[0]):
                     k = room_idx[j]
-                    if lengths[k] >= p.min_edge_px and end_distance(s, k, ex, ey) <= p.radius_px \
-                            and fabs(_side(s, k, ex, ey, axx, axy)) >= MIN_SIDE:
+                    if lengths[k] < p.min_edge_px:
+                        continue
+                    if not (end_distance(s, k, chain[0], chain[1]) <= p.radius_px
+                            and fabs(_side(s, k, chain[0], chain[1], axx, axy)) >= MIN_SIDE) \
+                            and not (end_distance(s, k, chain[2], chain[3]) <= p.radius_px
+                                     and fabs(_side(s, k, chain[2], chain[3], axx, axy))
+                                     >= MIN_SIDE):
+                        continue
+                    # Near the horizon an edge of the box itself can be labelled V1 or V2:
+                    # it still points at one of the box's OVPs.
+                    if vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o1)) \
+                            > p.member_angle_deg \
+                            and vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o2)) \
+                            > p.member_angle_deg:
                         room_corner = True
                         break
-                if room_corner or not horizon_ovps(fr, p, lines, a, b, d1, d2, &ortho):
+                if room_corner:
                     continue
                 h = new_hypothesis(found)
                 set_ovps(h, d1, d2, ortho, chain[4])
