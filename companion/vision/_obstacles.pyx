@@ -373,19 +373,30 @@ cdef list vertical_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] 
     return chains
 
 
+cdef inline bint leaves_end(double[:, ::1] s, double[::1] lengths, Py_ssize_t f, double ex,
+                            double ey, double axx, double axy, Params* p,
+                            double* side) noexcept:
+    """Whether segment ``f`` is a leg of a vertical edge (direction (axx, axy)) at its end
+    (ex, ey): at least ``min_edge_px`` long, an endpoint within ``radius_px`` of the end,
+    leaving at 20° or more; ``side`` ← the sine of that angle (:func:`_side`)."""
+    if lengths[f] < p.min_edge_px or end_distance(s, f, ex, ey) > p.radius_px:
+        return False
+    side[0] = _side(s, f, ex, ey, axx, axy)
+    return fabs(side[0]) >= MIN_SIDE
+
+
 cdef list edge_legs(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
                     Py_ssize_t[::1] verticals, Py_ssize_t[::1] free_idx, Params* p):
     """Vertical edges with the non-Manhattan legs that end at each of their two ends.
 
     Returns a list of (chain, legs_a, legs_b) with ``chain`` as :func:`vertical_chains`
     gives it; a leg is (segment index, side): the side (±1) of the edge it leaves toward.
-    Legs are at least 20° off the edge."""
+    Legs are at least 20° off the edge (:func:`leaves_end`)."""
     out = []
     chains = vertical_chains(s, lengths, lines, verticals, p)
     if free_idx.shape[0] == 0 or not chains:
         return out
-    cdef double r2 = p.radius_px * p.radius_px
-    cdef double ex, ey, d0, d1, axx, axy, side
+    cdef double ex, ey, axx, axy, side
     cdef Py_ssize_t j, f, end
     for chain in chains:
         xa, ya, xb, yb, length = chain
@@ -395,12 +406,7 @@ cdef list edge_legs(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
             ex, ey = (xa, ya) if end == 0 else (xb, yb)
             for j in range(free_idx.shape[0]):
                 f = free_idx[j]
-                d0 = (s[f, 0] - ex) * (s[f, 0] - ex) + (s[f, 1] - ey) * (s[f, 1] - ey)
-                d1 = (s[f, 2] - ex) * (s[f, 2] - ex) + (s[f, 3] - ey) * (s[f, 3] - ey)
-                if min(d0, d1) > r2 or lengths[f] < p.min_edge_px:
-                    continue
-                side = _side(s, f, ex, ey, axx, axy)
-                if fabs(side) >= MIN_SIDE:
+                if leaves_end(s, lengths, f, ex, ey, axx, axy, p, &side):
                     legs[end].append((f, 1.0 if side > 0 else -1.0))
         if legs[0] or legs[1]:
             out.append((chain, legs[0], legs[1]))
@@ -576,9 +582,8 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
     cdef double d2[3]
     cdef double o1[3]
     cdef double o2[3]
-    cdef double ortho, ex, ey, axx, axy
-    cdef Py_ssize_t a, b, leg, end, k, j
-    cdef bint room_corner
+    cdef double ortho, ex, ey
+    cdef Py_ssize_t a, b, leg, end, k
     cdef Hypothesis* h
     if not junctions or not edges:
         return
@@ -589,6 +594,10 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
             for leg, _ in legs:
                 attached.setdefault(leg, []).append((chain, end))
     for x, y, a, b in junctions:
+        if not horizon_ovps(fr, p, lines, a, b, d1, d2, &ortho):
+            continue
+        pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+        pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
         for leg in (a, b):
             if leg not in attached:
                 continue
@@ -596,31 +605,7 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                 ex, ey = (chain[0], chain[1]) if end == 0 else (chain[2], chain[3])
                 if hypot(ex - x, ey - y) <= 2 * p.radius_px:
                     continue  # the edge starts at the junction itself
-                if not horizon_ovps(fr, p, lines, a, b, d1, d2, &ortho):
-                    continue
-                pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
-                pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
-                axx, axy = (chain[2] - chain[0]) / chain[4], (chain[3] - chain[1]) / chain[4]
-                room_corner = False
-                for j in range(room_idx.shape[0]):
-                    k = room_idx[j]
-                    if lengths[k] < p.min_edge_px:
-                        continue
-                    if not (end_distance(s, k, chain[0], chain[1]) <= p.radius_px
-                            and fabs(_side(s, k, chain[0], chain[1], axx, axy)) >= MIN_SIDE) \
-                            and not (end_distance(s, k, chain[2], chain[3]) <= p.radius_px
-                                     and fabs(_side(s, k, chain[2], chain[3], axx, axy))
-                                     >= MIN_SIDE):
-                        continue
-                    # Near the horizon an edge of the box itself can be labelled V1 or V2:
-                    # it still points at one of the box's OVPs.
-                    if vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o1)) \
-                            > p.member_angle_deg \
-                            and vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o2)) \
-                            > p.member_angle_deg:
-                        room_corner = True
-                        break
-                if room_corner:
+                if room_edge_at(s, lengths, chain, room_idx, o1, o2, p):
                     continue
                 h = new_hypothesis(found)
                 set_ovps(h, d1, d2, ortho, chain[4])
@@ -634,6 +619,31 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
             else:
                 continue
             break
+
+
+cdef bint room_edge_at(double[:, ::1] s, double[::1] lengths, tuple chain,
+                       Py_ssize_t[::1] room_idx, const double* o1, const double* o2,
+                       Params* p):
+    """Whether a room edge (``room_idx``) leaves either end of the vertical edge ``chain``
+    (:func:`leaves_end`) and points at neither OVP ``o1``, ``o2`` within
+    ``member_angle_deg``: near the horizon an edge of the box itself can be labelled V1 or
+    V2, and it still points at one of the box's OVPs."""
+    cdef double axx = (chain[2] - chain[0]) / chain[4], axy = (chain[3] - chain[1]) / chain[4]
+    cdef double side
+    cdef Py_ssize_t j, k, end
+    for j in range(room_idx.shape[0]):
+        k = room_idx[j]
+        for end in range(2):
+            if leaves_end(s, lengths, k, chain[2 * end], chain[2 * end + 1], axx, axy, p,
+                          &side):
+                break
+        else:
+            continue
+        if vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o1)) > p.member_angle_deg \
+                and vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o2)) \
+                > p.member_angle_deg:
+            return True
+    return False
 
 
 cdef list leg_junctions(double[:, ::1] s, double[:, ::1] lines, double[::1] lengths,
