@@ -351,6 +351,43 @@ def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 1e-6
 
 
+def test_a_corner_at_the_foot_of_a_room_edge_takes_no_ovps_on_the_horizon():
+    # A rug's corner (or a shadow's) at the foot of a door frame: the bottom corner of a box
+    # 35° off the room, as far as its three legs go, but a room edge (the lintel, toward
+    # V1) leaves the vertical edge's top end. Room edges ending at the corner itself prove
+    # nothing: the box hides the room behind it, and a baseboard ends at its foot.
+    from companion.vision.obstacles import find_obstacles
+
+    a = np.radians(35.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    foot = np.array([0.2, 1.2, 4.0])  # on the floor, 1.2 m below the camera
+    b, b_u, b_v, t = _project([foot, foot + 0.8 * u, foot + 0.8 * v, foot + [0.0, -2.0, 0.0]])
+
+    def found(extra, label):
+        segs = np.array([[*b, *b_u], [*b, *b_v], [*b, *t], *extra])
+        labels = np.array([NONE, NONE, V3, *label])
+        corners = find_corners(segs, labels)
+        return find_obstacles(segs, corners, _room_layout(), labels == NONE, labels)
+
+    assert len(found([], [])) == 1  # nothing at the far end: a box's bottom corner
+    assert found([[*t, *(t + [-60.0, 0.0])]], [V1]) == []  # the lintel: a door frame
+    assert len(found([[*b, *(b + [-60.0, 0.0])]], [V1])) == 1  # a baseboard ending there
+    # An edge at the top that points at the box's own OVP is the box's top edge.
+    assert len(found([[*t, *_project([foot + [0.0, -2.0, 0.0] + 0.8 * u])[0]]], [V1])) == 1
+    # Where the edge runs out of the frame its visible end is no end: the floor's edges
+    # that the box hides stop there too. A box's top corner, its foot below the frame.
+    near = np.array([0.2, 1.2, 1.5])
+    top = near + [0.0, -0.5, 0.0]
+    c, c_u, c_v, f = _project([top, top + 0.8 * u, top + 0.8 * v, near])
+    assert f[1] > H
+    cut = c + (f - c) * (H - 1 - c[1]) / (f[1] - c[1])
+    for end, n in ((cut, 1), (c + 0.7 * (cut - c), 0)):  # at the border, then inside
+        segs = np.array([[*c, *c_u], [*c, *c_v], [*c, *end], [*end, *(end + [-60.0, 0.0])]])
+        labels = np.array([NONE, NONE, V3, V1])
+        assert len(find_obstacles(segs, find_corners(segs, labels), _room_layout(),
+                                  labels == NONE, labels)) == n
+
+
 def _room_layout(yaw_deg=0.0, v2_skew_deg=0.0, v2_seen=True):
     """The layout of a room ``yaw_deg`` off the view of a level camera (V3 straight down):
     V1 along the room's x axis, V2 along its z axis turned ``v2_skew_deg`` further (so V1

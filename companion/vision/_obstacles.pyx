@@ -105,6 +105,12 @@ cdef inline bint intersect(const double* a, const double* b, double* out) noexce
     return unit3(out) > 0
 
 
+cdef inline bint at_border(Frame* fr, double x, double y, double margin) noexcept nogil:
+    """Whether the pixel (x, y) is within ``margin`` of the frame's border (the principal
+    point is the frame's centre, so the frame is 2 cx + 1 by 2 cy + 1 pixels)."""
+    return x <= margin or y <= margin or x >= 2 * fr.cx - margin or y >= 2 * fr.cy - margin
+
+
 cdef inline double horizon_error(Frame* fr, const double* d) noexcept nogil:
     """How far a direction is from horizontal (⟂ V3), degrees."""
     return fabs(90.0 - angle_between_deg(d, fr.d3))
@@ -623,17 +629,18 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
 
 cdef bint room_edge_at(double[:, ::1] s, double[::1] lengths, tuple chain,
                        Py_ssize_t[::1] room_idx, const double* o1, const double* o2,
-                       Params* p):
+                       Params* p, bint both_ends=True):
     """Whether a room edge (``room_idx``) leaves either end of the vertical edge ``chain``
-    (:func:`leaves_end`) and points at neither OVP ``o1``, ``o2`` within
-    ``member_angle_deg``: near the horizon an edge of the box itself can be labelled V1 or
-    V2, and it still points at one of the box's OVPs."""
+    (:func:`leaves_end`; with ``both_ends`` False only its second end, ``chain[2:4]``) and
+    points at neither OVP ``o1``, ``o2`` within ``member_angle_deg``: near the horizon an
+    edge of the box itself can be labelled V1 or V2, and it still points at one of the
+    box's OVPs."""
     cdef double axx = (chain[2] - chain[0]) / chain[4], axy = (chain[3] - chain[1]) / chain[4]
     cdef double side
     cdef Py_ssize_t j, k, end
     for j in range(room_idx.shape[0]):
         k = room_idx[j]
-        for end in range(2):
+        for end in range(0 if both_ends else 1, 2):
             if leaves_end(s, lengths, k, chain[2 * end], chain[2 * end + 1], axx, axy, p,
                           &side):
                 break
@@ -1063,8 +1070,11 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     cdef Py_ssize_t* partners = <Py_ssize_t*>malloc(max(free_idx.shape[0], 1) * sizeof(Py_ssize_t))
     cdef double d1[3]
     cdef double d2[3]
+    cdef double o1[3]
+    cdef double o2[3]
     cdef double lam3
     cdef Hypothesis* h
+    cdef Py_ssize_t[::1] room_idx = np.flatnonzero((lab >= 0) & (lab != vertical_label))
     try:
         if nc and verticals.shape[0]:
             # Pairs (eqs. 5–8): each Table-I corner's vertical edge followed to its other
@@ -1075,11 +1085,21 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                     continue
                 nh = partner_legs(s, lines, pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
                                   reach[g], cs[g], cn[g], free_idx, &p, partners)
-                # With no leg of C_h in sight, both OVPs where C_g's legs cross the horizon.
-                if not (partner_ovps(&fr, &p, lines, cs[g], cn[g], partners, nh, d1, d2, &lam3)
-                        or (reach[g] >= 2 * p.min_edge_px and horizon_ovps(
-                            &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3))):
-                    continue
+                # With no leg of C_h in sight, both OVPs where C_g's legs cross the horizon,
+                # unless a room edge leaves the vertical edge's far end: then the edge is a
+                # door frame's or an aligned box's, and the legs a rug's or a shadow's
+                # corner at its foot (room_edge_at). At C_g, and where the edge runs out of
+                # the frame, the room's edges that the box hides end too: no proof there.
+                if not partner_ovps(&fr, &p, lines, cs[g], cn[g], partners, nh, d1, d2, &lam3):
+                    if reach[g] < 2 * p.min_edge_px or not horizon_ovps(
+                            &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3):
+                        continue
+                    pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+                    pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
+                    if not at_border(&fr, far[g, 0], far[g, 1], p.radius_px) and room_edge_at(
+                            s, lengths, (pc[g, 0], pc[g, 1], far[g, 0], far[g, 1], reach[g]),
+                            room_idx, o1, o2, &p, False):
+                        continue
                 h = new_hypothesis(&found)
                 set_ovps(h, d1, d2, lam3, reach[g])
                 h.corner = g
@@ -1093,8 +1113,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         if found.count == 0:
             edge_horizon_pairs(&fr, &p, lines, edges, &found)
         if found.count == 0 and p.hidden_edge_corners:
-            junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions,
-                                np.flatnonzero((lab >= 0) & (lab != vertical_label)), &found)
+            junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx, &found)
         if found.count == 0 and room_seen:
             single_halves(&fr, &p, &halves, &found)
         if found.count == 0:
