@@ -150,6 +150,39 @@ def test_the_orthogonality_prior_does_not_override_well_seen_segments():
     assert prior.mean() < 0.4 and alone.mean() < 0.4
 
 
+@pytest.mark.parametrize("far_wall_edges, focal_px", [(30, 554.0), (12, 320.0)])
+def test_self_calibration_keeps_the_better_supported_of_two_consistent_focal_lengths(
+        far_wall_edges, focal_px):
+    # A 60° lens (f = 554 px): one wall's VP right of the centre, the far wall's far to the
+    # left, and a rotated obstacle's 12 edges meeting between them, just where a 90° lens
+    # (the first guess, 320 px) would put the far wall's. Both pairs are self-consistent
+    # focal lengths. The far wall's wins when its edges clearly outweigh the obstacle's;
+    # with as many, the first guess's stays.
+    from companion.vision.pipeline import Pipeline
+
+    rng = np.random.default_rng(3)
+    f, a = 554.0, 275.0
+    v1, v2 = C + [a, 0.0], C - [f * f / a, 0.0]
+    obstacle_vp = C - [320.0**2 / a, 0.0]  # ⟂ V1 under a 320 px focal length
+
+    def starts(n, ys):
+        return np.column_stack([rng.uniform(20, W - 20, n), rng.uniform(*ys, n)])
+
+    xs = rng.uniform(20, W - 20, 12)
+    segs = np.vstack([
+        _toward(v1, starts(20, (20, H - 20)), 80),
+        _toward(v2, starts(far_wall_edges, (20, H - 20)), 80),
+        _toward(obstacle_vp, starts(12, (300, 460)), 80),
+        np.column_stack([xs, np.full(12, 100.0), xs, np.full(12, 300.0)]),
+    ])
+    layout, source = Pipeline()._layout(segs, W, H)
+    assert source == "estimated"
+    assert layout.focal_px == pytest.approx(focal_px, rel=0.03)
+    room = sorted(to_pixels(layout.vps[k])[0] for k in (V1, V2))
+    paired = v2 if focal_px == f else obstacle_vp
+    assert room == pytest.approx([paired[0], v1[0]], abs=3.0)
+
+
 def test_layout_without_segments_is_not_found_and_finite():
     layout = detect_layout_vps(np.empty((0, 4)), W, H, F)
     assert not layout.found

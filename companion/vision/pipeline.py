@@ -39,6 +39,10 @@ STAGES = ("lines", "vps", "corners", "obstacles", "heading")
 SELF_CALIBRATION_TOL = 0.1
 """relative change of the estimated focal length when the VPs are found again with it"""
 
+SELF_CALIBRATION_MARGIN = 0.1
+"""a focal length a later guess confirms replaces an earlier guess's only when the VPs
+found with it have more than this share more support (V1, V2 and V3 together)"""
+
 SELF_CALIBRATION_GUESSES = (0.5, 0.3, 1.0, 1.5, 2.0)
 """focal-length guesses, in frame widths, tried in turn until one leads to an estimate:
 horizontal fields of view of 90°, 118°, 53°, 37° and 28°. A guess far from the truth can
@@ -95,6 +99,11 @@ class RunningFocal:
 
     def add(self, focal_px: float) -> RunningFocal:
         return RunningFocal((self.estimates_px + (float(focal_px),))[-FOCAL_MEMORY:])
+
+
+def _support(layout: LayoutVPs) -> float:
+    """How strongly the segments back a layout: the support of its observed VPs (pixels)."""
+    return float(np.sum(layout.support_px[np.array(layout.observed)]))
 
 
 def _orthogonal_focal(layout: LayoutVPs, centre: np.ndarray) -> float | None:
@@ -221,9 +230,11 @@ class Pipeline:
         is searched with the running estimate alone (``estimated``): one VP search per
         frame instead of several. Until then each frame calibrates itself: VPs found with
         an assumed focal length (each of ``SELF_CALIBRATION_GUESSES`` in turn) give ``f``,
-        and the VPs are found again with it (``estimated``); an estimate is taken at once
-        when the VPs found with it give it back (within ``SELF_CALIBRATION_TOL``), else
-        only if no guess does better. Else ``assumed``.
+        and the VPs are found again with it (``estimated``). An estimate the VPs found with
+        it give back (within ``SELF_CALIBRATION_TOL``) is confirmed; of several confirmed,
+        the earliest guess's, unless a later one's VPs have clearly more support
+        (``SELF_CALIBRATION_MARGIN``). Without a confirmed estimate, the first unconfirmed
+        one; else ``assumed``.
         """
         vp = self.config.vision.vanishing
         if self.config.camera.focal_px:
@@ -249,7 +260,7 @@ class Pipeline:
             # under it: it calibrates itself, starting from the running estimate.
             guesses.insert(0, f_run)
 
-        first = unconfirmed = None
+        first = unconfirmed = best = None
         for guess in guesses:
             layout = detect_layout_vps(segments, w, h, guess, vp)
             first = first or layout
@@ -259,11 +270,18 @@ class Pipeline:
             again = detect_layout_vps(segments, w, h, f, vp)
             f_again = _orthogonal_focal(again, centre)
             # A frame picked under a wrong guess can imply a focal length under which a
-            # different frame wins; a true estimate is a fixed point.
+            # different frame wins; a true estimate is a fixed point. A frame can have more
+            # than one (an obstacle's edges paired with V1 instead of the room's far wall):
+            # the one whose VPs the segments back clearly better wins, else the earlier.
             if f_again is not None and abs(f_again - f) <= SELF_CALIBRATION_TOL * f:
-                self.running_focal = self.running_focal.add(f)
-                return again, "estimated"
+                if best is None or _support(again) > (1 + SELF_CALIBRATION_MARGIN) * _support(
+                        best):
+                    best = again
+                continue
             unconfirmed = unconfirmed or again
+        if best is not None:
+            self.running_focal = self.running_focal.add(best.focal_px)
+            return best, "estimated"
         if unconfirmed is not None:
             self.running_focal = self.running_focal.add(unconfirmed.focal_px)
             return unconfirmed, "estimated"
