@@ -97,6 +97,9 @@ def find_obstacles(
     is the paper's pair; a leg of ``C_h`` that the line detector missed (a thin top face,
     low contrast against the wall) is replaced by the horizon: ``O = L^g ∩ horizon``.
     At least one OVP must come from two real edges (``L^g × L^h``), and λ3 (eq. 8) holds.
+    With no leg of ``C_h`` at all, both OVPs are where ``C_g``'s legs cross the horizon,
+    unless a room edge leaves the vertical edge's far end inside the frame (a door frame or
+    an aligned box, with a rug's or a shadow's corner at its foot).
     When no pair is found this way, boxes that show fewer corners are looked for: leg
     junctions one above the other, vertical edges with a leg at each end, and (with
     ``hidden_edge_corners``) two legs meeting where no vertical edge shows, one of them
