@@ -44,9 +44,10 @@ SELF_CALIBRATION_MARGIN = 0.1
 found with it have more than this share more support (V1, V2 and V3 together)"""
 
 SELF_CALIBRATION_GUESSES = (0.5, 0.3, 1.0, 1.5, 2.0)
-"""focal-length guesses, in frame widths, tried in turn until one leads to an estimate:
-horizontal fields of view of 90°, 118°, 53°, 37° and 28°. A guess far from the truth can
-pick the wrong V1–V2 pair, so a narrow or a wide lens needs a guess of its own."""
+"""focal-length guesses, in frame widths, each tried in turn (the earlier wins a tie, see
+``SELF_CALIBRATION_MARGIN``): horizontal fields of view of 90°, 118°, 53°, 37° and 28°.
+A guess far from the truth can pick the wrong V1–V2 pair, so a narrow or a wide lens needs
+a guess of its own."""
 
 FOCAL_RANGE = (0.2, 3.0)
 """estimates outside these frame widths (fields of view of 136° and 19°) are discarded"""
