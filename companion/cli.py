@@ -86,6 +86,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="instead: the frozen dev and test splits of this renderer (pathtraced "
                          "needs companion[render]), focal length not given, at 640×480 90°, "
                          "640×480 60° and 320×240 90°")
+    ev.add_argument("--lens-given", action="store_true",
+                    help="with --renderer: give the pipeline the rendered focal length and "
+                         "lens distortion, a calibrated camera (a diagnosis)")
     ev.add_argument("--focal-given", action="store_true",
                     help="with --renderer: give the pipeline the rendered focal length (a "
                          "diagnosis; the targets are without it)")
@@ -196,7 +199,7 @@ def dry_run(args) -> int:
             if log:
                 log.write(log_record(frame.index, frame.t_s, est, cmd, latency_ms, frame.source))
             if writer is not None:
-                out = annotate(frame.image, est, cmd)
+                out = annotate(pipeline.pinhole(frame.image), est, cmd)
                 if out.shape[:2] != (video.height, video.width):
                     out = cv2.resize(out, (video.width, video.height))
                 writer.write(out)
@@ -236,9 +239,9 @@ def run_eval(args) -> int:
         return run_eval_splits(args)
     if args.split:
         raise UserError("--split needs --renderer NAME or --yud DIR")
-    if args.focal_given:
-        raise UserError("--focal-given goes with --renderer NAME (without it, the focal "
-                        "length is given unless --no-focal)")
+    if args.focal_given or args.lens_given:
+        raise UserError("--focal-given and --lens-given go with --renderer NAME (without "
+                        "it, the focal length is given unless --no-focal)")
     if args.variants:
         raise UserError("--variants needs --yud DIR (views of the York Urban DB photographs)")
     if args.scenes < 1:
@@ -285,6 +288,9 @@ def run_eval_splits(args) -> int:
     cfg = _config(args.eval_config, None)
     start = time.perf_counter()
     if args.clips:
+        if args.focal_given or args.lens_given:
+            raise UserError("--clips estimates the focal length as a video does; "
+                            "--focal-given and --lens-given are for the splits")
         return _eval_clips(args, renderers, splits, cfg, start)
     figures = {}
     for renderer in renderers:
@@ -295,17 +301,19 @@ def run_eval_splits(args) -> int:
             try:
                 reports[s] = run_split(renderer, s, cfg, args.workers,
                                        lambda d, t, p=progress, r=renderer, s=s: p.update(
-                                           d, t, f"{r} {s}"), focal_given=args.focal_given)
+                                           d, t, f"{r} {s}"), focal_given=args.focal_given,
+                                       lens_given=args.lens_given)
             finally:
                 progress.close()
-        for line in format_splits(renderer, reports, args.focal_given):
+        for line in format_splits(renderer, reports, args.focal_given, args.lens_given):
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
     took = time.perf_counter() - start
     print(f"({took:.0f} s; companion eval --renderer {args.renderer}"
           + (f" --split {split}" if split != "all" else "")
-          + (" --focal-given)" if args.focal_given else ")"))
+          + (" --focal-given" if args.focal_given else "")
+          + (" --lens-given" if args.lens_given else "") + ")")
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)

@@ -45,6 +45,10 @@ def _range(lo: float | None = None, hi: float | None = None, **kw: Any) -> dict[
 @dataclass(frozen=True)
 class CameraConfig:
     focal_px: float | None = field(default=None, metadata=_range(1.0, 100000.0))
+    distortion: tuple[float, ...] | None = field(
+        default=None, metadata=_range(-100.0, 100.0, length=(1, 5)))
+    """the lens's distortion as OpenCV's calibration gives it: (k1, k2, p1, p2, k3) or a
+    prefix; needs ``focal_px``, to which it is relative. None: a pinhole"""
     device: str = "/dev/video0"
     width: int = field(default=640, metadata=_range(16, 8192))
     height: int = field(default=480, metadata=_range(16, 8192))
@@ -165,7 +169,11 @@ def load_config(path: str | Path | None) -> Config:
 
 def from_mapping(data: Any, source: str = "<config>") -> Config:
     """Build and validate a :class:`Config` from nested mappings (as parsed from YAML)."""
-    return _build(Config, data, source, "")
+    cfg = _build(Config, data, source, "")
+    if cfg.camera.distortion and not cfg.camera.focal_px:
+        raise ConfigError(f"{source}: camera.distortion needs camera.focal_px (its "
+                          "coefficients are relative to the focal length)")
+    return cfg
 
 
 def _build(cls: type, data: Any, source: str, prefix: str):
@@ -195,6 +203,14 @@ def _value(tp: Any, f: dataclasses.Field, value: Any, source: str, key: str):
         raise ConfigError(f"{source}: {key} must not be empty")
     if dataclasses.is_dataclass(tp):
         return _build(tp, value, source, key + ".")
+    if typing.get_origin(tp) is tuple:
+        lo_n, hi_n = f.metadata.get("length", (0, None))
+        if not isinstance(value, list) or len(value) < lo_n or (
+                hi_n is not None and len(value) > hi_n):
+            raise ConfigError(f"{source}: {key} must be a list of {lo_n} to {hi_n} numbers, "
+                              f"got {_show(value)}")
+        item = typing.get_args(tp)[0]
+        return tuple(_value(item, f, v, source, f"{key}[{i}]") for i, v in enumerate(value))
     if tp is bool:
         if not isinstance(value, bool):
             raise ConfigError(f"{source}: {key} must be true or false, got {_show(value)}")

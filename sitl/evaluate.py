@@ -27,7 +27,8 @@ Figures:
 
 The pipeline is given the rendered camera's focal length (``camera.focal_px``, hence
 D = f as the truth uses) unless ``assume_focal`` is False, in which case it estimates it
-(D = the estimate) and η is compared with the same truth.
+(D = the estimate) and η is compared with the same truth. With ``assume_lens`` it is also
+given the lens distortion (``camera.distortion``, path-traced frames): a calibrated camera.
 
 Path-traced frames take seconds each, so they are cached under
 ``$XDG_CACHE_HOME/companion/renders`` (``~/.cache`` by default), keyed by the renderer's
@@ -47,6 +48,7 @@ import cv2
 import numpy as np
 
 from companion.config import Config
+from companion.vision.lens import distort_px
 from companion.vision.pipeline import Pipeline
 from sitl.scene import ObstacleTruth, SceneTruth, random_scene, render
 
@@ -236,25 +238,34 @@ def evaluate_scene(
     assume_focal: bool = True,
     renderer: str = "scene",
     hfov_deg: float | None = None,
+    assume_lens: bool = False,
 ) -> SceneResult:
     """Draw scene ``index`` of ``seed``, run the pipeline, compare with the truth."""
     image, truth = draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg)
     cfg = config or Config()
-    if assume_focal:
-        cfg = replace(cfg, camera=replace(cfg.camera, focal_px=truth.focal_px))
+    lens = assume_lens and bool(truth.distortion)
+    if assume_focal or assume_lens:
+        cfg = replace(cfg, camera=replace(cfg.camera, focal_px=truth.focal_px,
+                                          distortion=truth.distortion if lens else None))
     est = Pipeline(cfg)(image, camera_height_m=truth.camera_height_m)
+
+    def in_frame(points_px):
+        """Pinhole pixels of the estimate → pixels of the frame, where the truth is."""
+        pts = np.asarray(points_px, dtype=float).reshape(-1, 2)
+        return distort_px(pts, width, height, truth.focal_px, truth.distortion) if lens else pts
+
     targets = [o for o in truth.obstacles if o.non_manhattan]
     detectable = [o for o in targets if o.detectable]
     target = (detectable or targets or [None])[0]
     corner_err = range_true = None
     if targets and est.obstacles:
-        matched, d = _match(est.obstacles[0].corners_px, truth)
+        matched, d = _match(in_frame(est.obstacles[0].corners_px), truth)
         if matched is not None:
             target = matched
             corner_err = d / math.hypot(width, height) * 100.0
             if est.contact is not None and matched.floor_corners:
                 fc = np.array(matched.floor_corners)
-                near = np.argmin(np.hypot(*(fc[:, :2] - np.array(est.contact.pixel)).T))
+                near = np.argmin(np.hypot(*(fc[:, :2] - in_frame(est.contact.pixel)[0]).T))
                 range_true = float(fc[near, 2])
     return SceneResult(
         index=index,
@@ -285,9 +296,11 @@ def run_eval(
     progress=None,
     renderer: str = "scene",
     hfov_deg: float | None = None,
+    assume_lens: bool = False,
 ) -> EvalReport:
     """Evaluate ``scenes`` seeded scenes; ``progress(done, total)`` is called as they finish."""
-    jobs = [(seed, i, config, obstacle_share, width, height, assume_focal, renderer, hfov_deg)
+    jobs = [(seed, i, config, obstacle_share, width, height, assume_focal, renderer, hfov_deg,
+             assume_lens)
             for i in range(scenes)]
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
     results: list[SceneResult] = []
@@ -343,10 +356,11 @@ def format_report(report: EvalReport) -> list[str]:
 
 
 def run_split(renderer: str, split: str, config: Config | None = None,
-              workers: int | None = None, progress=None, focal_given: bool = False
-              ) -> dict[str, EvalReport]:
+              workers: int | None = None, progress=None, focal_given: bool = False,
+              lens_given: bool = False) -> dict[str, EvalReport]:
     """One frozen split of one renderer at every camera of :data:`CAMERAS`, focal length
-    not given (unless ``focal_given``, a diagnosis): {camera label: report}.
+    not given (unless ``focal_given``, or ``lens_given``: the focal length and the lens
+    distortion, diagnoses): {camera label: report}.
     ``progress(done, total)`` counts scenes."""
     seed, scenes = SPLITS[(renderer, split)]
     total = scenes * len(CAMERAS)
@@ -357,7 +371,8 @@ def run_split(renderer: str, split: str, config: Config | None = None,
                 progress(k * scenes + done, total)
         out[label] = run_eval(scenes, seed, config, width=w, height=h,
                               assume_focal=focal_given,
-                              workers=workers, progress=step, renderer=renderer, hfov_deg=fov)
+                              workers=workers, progress=step, renderer=renderer, hfov_deg=fov,
+                              assume_lens=lens_given)
     return out
 
 
@@ -367,7 +382,7 @@ def _split_target(label: str) -> dict[str, float]:
 
 
 def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
-                  focal_given: bool = False) -> list[str]:
+                  focal_given: bool = False, lens_given: bool = False) -> list[str]:
     """One table for a renderer: a row per camera and split, issue 18's targets beside."""
 
     def pct(x):
@@ -377,6 +392,8 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
         return "n/a" if x is None else f"{x:.2f}"
 
     given = "given (a diagnosis: the targets are without it)" if focal_given else "not given"
+    if lens_given:
+        given = "and lens distortion given (a diagnosis: the targets are without them)"
     lines = [f"renderer {renderer}: focal length {given}",
              f"{'camera':<14} {'split':<5} {'seed':>5} {'det %':>6} {'η med°':>7} {'η p90°':>7} "
              f"{'FP %':>5} {'sign✗':>7} {'corner %':>8}   targets det/med/p90"]

@@ -217,6 +217,7 @@ class SceneTruth:
     layout_vps: list[list[float]]  # room north, east, down axes
     obstacles: list[ObstacleTruth]
     camera_height_m: float = 0.0
+    distortion: tuple[float, ...] = ()  # the lens as OpenCV's (k1, k2, p1, p2, k3); () pinhole
 
     def to_json(self) -> dict:
         return asdict(self)

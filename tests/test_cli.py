@@ -76,6 +76,23 @@ def test_annotate_writes_every_frame(sample_video, tmp_path):
     assert frames == 6
 
 
+def test_a_calibrated_lens_runs_and_annotates_the_pinhole_picture(sample_video, tmp_path):
+    video, _ = sample_video
+    cfg = tmp_path / "lens.yaml"
+    cfg.write_text("camera:\n  focal_px: 381\n  distortion: [-0.05, 0.01]\n")
+    out, log = tmp_path / "ann.mp4", tmp_path / "log.jsonl"
+    r = run("--video", video, "--dry-run", "--config", cfg, "--annotate", out, "--log", log)
+    assert r.returncode == 0, r.stderr
+    assert len(read_log(log)) == 6
+    cap = cv2.VideoCapture(str(out))
+    ok, first = cap.read()
+    assert ok and first.shape[:2] == (480, 640)
+    # Without the focal length the coefficients mean nothing: refused in one line.
+    cfg.write_text("camera:\n  distortion: [-0.05]\n")
+    _assert_one_line_error(run("--video", video, "--dry-run", "--config", cfg),
+                           "camera.distortion needs camera.focal_px")
+
+
 def test_blank_video_holds(blank_video, tmp_path):
     log = tmp_path / "log.jsonl"
     assert run("--video", blank_video, "--dry-run", "--log", log).returncode == 0
@@ -234,6 +251,9 @@ def test_bench_and_sim_reject_bad_arguments_in_one_line():
     _assert_one_line_error(run("bench", "--latency-frames", "0"), "--latency-frames")
     _assert_one_line_error(run("sim", "--eta0", "120"), "between -89 and 89")
     _assert_one_line_error(run("eval", "--variants"), "--variants needs --yud")
+    _assert_one_line_error(run("eval", "--lens-given"), "go with --renderer")
+    _assert_one_line_error(run("eval", "--renderer", "scene", "--clips", "--lens-given"),
+                           "are for the splits")
 
 
 def test_dry_run_needs_no_mavlink_packages(sample_video):

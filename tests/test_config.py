@@ -48,6 +48,14 @@ def test_partial_file_overrides_only_its_keys(tmp_path):
         ({"vision": {"obstacles": {"orthogonal_tol_deg": 0}}},
          "vision.obstacles.orthogonal_tol_deg must be between"),
         ([1, 2], "top level must be a mapping"),
+        ({"camera": {"focal_px": 300, "distortion": -0.1}},
+         "camera.distortion must be a list of 1 to 5 numbers"),
+        ({"camera": {"focal_px": 300, "distortion": [0.1] * 6}},
+         "camera.distortion must be a list of 1 to 5 numbers"),
+        ({"camera": {"focal_px": 300, "distortion": [-0.1, "x"]}},
+         "camera.distortion[1] must be a number"),
+        # The coefficients are relative to the focal length: without it they mean nothing.
+        ({"camera": {"distortion": [-0.1]}}, "camera.distortion needs camera.focal_px"),
     ],
 )
 def test_bad_values_name_the_key(data, needle):
@@ -57,6 +65,12 @@ def test_bad_values_name_the_key(data, needle):
     assert msg.startswith("x.yaml: ")
     assert needle in msg
     assert "\n" not in msg
+
+
+def test_lens_distortion_is_a_list_of_opencv_coefficients():
+    cam = from_mapping({"camera": {"focal_px": 300, "distortion": [-0.25, 0.07]}}).camera
+    assert cam.distortion == (-0.25, 0.07)
+    assert Config().camera.distortion is None
 
 
 def test_null_allowed_only_where_optional():

@@ -13,6 +13,7 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 
+import cv2
 import numpy as np
 
 from companion.config import Config, VisionConfig
@@ -26,6 +27,7 @@ from companion.vision.corners import (
 )
 from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
+from companion.vision.lens import undistort_maps
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
 from companion.vision.ranging import FloorContact, floor_contacts, path_distance
@@ -201,6 +203,7 @@ class Pipeline:
         self.running_focal = RunningFocal()
         self.track: Track | None = None
         self._vision: dict[tuple[int, int], VisionConfig] = {}
+        self._lens_maps: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._focal_size: tuple[int, int] | None = None
         vp = self.config.vision.vanishing
         self._known_focal_vp = replace(
@@ -298,9 +301,23 @@ class Pipeline:
             return self.config.camera.focal_px
         return self.running_focal.focal_px or width / 2.0
 
+    def pinhole(self, frame: np.ndarray) -> np.ndarray:
+        """The frame as every stage sees it: with ``camera.distortion`` configured, the
+        lens's distortion undone (:mod:`~companion.vision.lens`; same size and focal
+        length), else the frame itself. Pixel positions in an :class:`Estimate` are
+        positions in this picture."""
+        cam = self.config.camera
+        if not cam.distortion:
+            return frame
+        h, w = frame.shape[:2]
+        if (w, h) not in self._lens_maps:
+            self._lens_maps[(w, h)] = undistort_maps(w, h, cam.focal_px, cam.distortion)
+        mx, my = self._lens_maps[(w, h)]
+        return cv2.remap(frame, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
     def segments(self, frame: np.ndarray) -> np.ndarray:
         """Stage 1: the frame's line segments (N×4 pixels), filtered and capped."""
-        return self._segments(to_gray(frame))[0]
+        return self._segments(self.pinhole(to_gray(frame)))[0]
 
     def _segments(self, gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Every segment, for the layout VPs, and those that pass the a-contrario test
@@ -351,7 +368,7 @@ class Pipeline:
         ms: dict[str, float] = {}
 
         t0 = time.perf_counter()
-        gray = to_gray(frame)
+        gray = self.pinhole(to_gray(frame))
         all_segments, segments = self._segments(gray)
         t1 = time.perf_counter()
         ms["lines"] = (t1 - t0) * 1e3
