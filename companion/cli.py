@@ -173,6 +173,8 @@ def dry_run(args) -> int:
             raise UserError(f"cannot write annotated video {args.annotate}")
     if cfg.camera.focal_px:
         focal = f"focal {cfg.camera.focal_px:g} px (given)"
+        if cfg.camera.distortion:
+            focal += ", lens distortion undone"
     else:
         focal = ("focal length estimated from the layout VPs, carried from frame to frame "
                  "(half the width until a frame gives it); D of eq. 10 = that focal length")

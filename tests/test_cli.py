@@ -83,6 +83,7 @@ def test_a_calibrated_lens_runs_and_annotates_the_pinhole_picture(sample_video, 
     out, log = tmp_path / "ann.mp4", tmp_path / "log.jsonl"
     r = run("--video", video, "--dry-run", "--config", cfg, "--annotate", out, "--log", log)
     assert r.returncode == 0, r.stderr
+    assert "focal 381 px (given), lens distortion undone" in r.stdout
     assert len(read_log(log)) == 6
     cap = cv2.VideoCapture(str(out))
     ok, first = cap.read()
