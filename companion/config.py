@@ -48,7 +48,8 @@ class CameraConfig:
     distortion: tuple[float, ...] | None = field(
         default=None, metadata=_range(-100.0, 100.0, length=(1, 5)))
     """the lens's distortion as OpenCV's calibration gives it: (k1, k2, p1, p2, k3) or a
-    prefix; needs ``focal_px``, to which it is relative. None: a pinhole"""
+    prefix; needs ``focal_px``, to which it is relative. [0]: a pinhole. None: estimated
+    on the video's first frames"""
     device: str = "/dev/video0"
     width: int = field(default=640, metadata=_range(16, 8192))
     height: int = field(default=480, metadata=_range(16, 8192))
@@ -170,7 +171,7 @@ def load_config(path: str | Path | None) -> Config:
 def from_mapping(data: Any, source: str = "<config>") -> Config:
     """Build and validate a :class:`Config` from nested mappings (as parsed from YAML)."""
     cfg = _build(Config, data, source, "")
-    if cfg.camera.distortion and not cfg.camera.focal_px:
+    if cfg.camera.distortion and any(cfg.camera.distortion) and not cfg.camera.focal_px:
         raise ConfigError(f"{source}: camera.distortion needs camera.focal_px (its "
                           "coefficients are relative to the focal length)")
     return cfg

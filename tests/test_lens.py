@@ -7,10 +7,16 @@ import numpy as np
 import pytest
 
 from companion.config import Config
-from companion.vision.lens import camera_matrix, distort_px, undistort_maps
-from companion.vision.pipeline import Pipeline
+from companion.vision.lens import (
+    camera_matrix,
+    distort_px,
+    half_diagonal,
+    radial_k,
+    undistort_maps,
+)
+from companion.vision.pipeline import LENS_FRAMES, Pipeline, RunningLens
 from sitl.sample import sample_scene
-from sitl.scene import Camera, render
+from sitl.scene import Camera, render, yaw_sweep
 
 
 def through_lens(image: np.ndarray, focal_px: float, distortion) -> np.ndarray:
@@ -85,3 +91,62 @@ def test_the_pathtraced_lens_as_opencv_coefficients():
     for k1 in (0.01, 0.04):
         ours = distort_px(pts, 640, 480, cam.focal_px, opencv_distortion(cam, k1))
         assert np.abs(ours - distort_points(cam, k1, pts)).max() < 0.2
+
+
+def _sweep_through_lens(distortion, frames=12):
+    """A yaw sweep past the sample's rotated box, each frame taken through ``distortion``
+    (None: a pinhole): (frames, truths, focal length)."""
+    scene, cam = sample_scene()
+    images, truths = [], []
+    for c in yaw_sweep(cam, 4.0, 20.0, frames):
+        image, truth = render(scene, c)
+        images.append(through_lens(image, c.focal_px, distortion) if distortion else image)
+        truths.append(truth)
+    return images, truths, cam.focal_px
+
+
+def test_a_video_learns_its_lens_on_its_first_frames_and_then_undoes_it():
+    lens = (-0.1,)
+    images, truths, focal = _sweep_through_lens(lens)
+    cfg = replace(Config(), camera=replace(Config().camera, focal_px=focal))
+    learnt = Pipeline(cfg)
+    pinhole = Pipeline(replace(cfg, camera=replace(cfg.camera, distortion=(0.0,))))
+    for k, image in enumerate(images):
+        ests = learnt(image), pinhole(image)
+        assert (learnt.running_lens.k is None) == (k < LENS_FRAMES - 1)
+    # The learnt coefficient is the lens's, on the half-diagonal: k1 (r / f)².
+    true_k = lens[0] * (half_diagonal(640, 480) / focal) ** 2
+    assert learnt.running_lens.k == pytest.approx(true_k, abs=0.02)
+    assert pinhole.running_lens.k is None  # a lens given as a pinhole is not estimated
+    # After it, η is the pinhole's again; a pipeline told the lens is a pinhole is off.
+    eta = truths[-1].obstacles[0].eta_deg
+    learnt_eta, pinhole_eta = ests[0].eta_deg, ests[1].eta_deg
+    assert learnt_eta == pytest.approx(eta, abs=0.5)
+    assert abs(pinhole_eta - eta) > 1.0
+
+
+def test_a_pinhole_video_learns_that_it_is_one():
+    images, _, focal = _sweep_through_lens(None, frames=LENS_FRAMES)
+    pipe = Pipeline(replace(Config(), camera=replace(Config().camera, focal_px=focal)))
+    for image in images:
+        pipe(image)
+    assert pipe.running_lens.k == 0.0
+    assert pipe.pinhole(images[0]) is images[0]  # nothing undone, nothing copied
+
+
+def test_a_frame_without_a_room_says_nothing_about_the_lens():
+    blank = np.full((480, 640), 128, np.uint8)
+    assert radial_k(np.empty((0, 4)), 640, 480, 320.0) is None
+    pipe = Pipeline()
+    pipe(blank)
+    assert pipe.running_lens.estimates_k == ()
+
+
+def test_the_video_lens_is_the_median_of_its_first_frames_and_a_weak_one_is_a_pinhole():
+    lens = RunningLens()
+    for k in (-0.05, -0.06, 0.4, -0.05, -0.3, -0.04, -0.05, -0.06, -0.05):
+        assert lens.k is None  # not before LENS_FRAMES estimates
+        lens = lens.add(k)
+    assert lens.settled and lens.k == pytest.approx(-0.05)  # two wild frames outvoted
+    weak = RunningLens((-0.02,) * LENS_FRAMES)
+    assert weak.k == 0.0  # within the estimate's own bias: left alone

@@ -10,6 +10,10 @@ The model is OpenCV's radial–tangential one, with the coefficients in the orde
 ``cv2.calibrateCamera`` returns them: ``(k1, k2, p1, p2[, k3])``, any prefix of it, on
 coordinates normalised by the focal length; the principal point is the frame centre
 (:func:`~companion.vision.geometry.principal_point`), as everywhere in the pipeline.
+
+A lens that was not given is estimated (:func:`radial_k`) with one radial coefficient on
+coordinates normalised by the half-diagonal instead, so that it needs no focal length:
+``undistort_maps(w, h, half_diagonal(w, h), (k,))`` undoes it.
 """
 
 from __future__ import annotations
@@ -17,9 +21,21 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from companion.vision.geometry import principal_point
+from companion.vision.geometry import principal_point, segment_lengths
+from companion.vision.vanishing import VPParams, assign_segments, detect_layout_vps
 
-__all__ = ["camera_matrix", "undistort_maps", "distort_px"]
+__all__ = ["camera_matrix", "undistort_maps", "distort_px", "half_diagonal",
+           "undistort_segments", "straightness_cost", "radial_k"]
+
+RADIAL_K_COARSE = tuple(round(0.10 - 0.05 * i, 2) for i in range(15))
+"""the radial coefficients (half-diagonal normalised) :func:`radial_k` tries first: from a
+mild pincushion to the barrel of a 120° action-camera lens"""
+
+RADIAL_K_STEP = 0.01
+"""then every this much within one coarse step of the best"""
+
+STRAIGHTNESS_CAP_DEG = 2.0
+"""a segment further than this from every layout VP counts as this far (not room)"""
 
 
 def camera_matrix(width: int, height: int, focal_px: float) -> np.ndarray:
@@ -67,3 +83,86 @@ def distort_px(points: np.ndarray, width: int, height: int, focal_px: float,
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
     return np.stack([xd, yd], axis=1) * focal_px + c
+
+
+def half_diagonal(width: int, height: int) -> float:
+    """Half the frame's diagonal in pixels: the unit of :func:`radial_k`'s coefficient."""
+    return float(np.hypot(width, height)) / 2.0
+
+
+def undistort_segments(segments: np.ndarray, width: int, height: int, k: float) -> np.ndarray:
+    """Segment endpoints (N×4 pixels) of a frame taken through a radial lens ``k`` (OpenCV's
+    k1 on coordinates normalised by :func:`half_diagonal`) → the pinhole picture's.
+
+    An edge the lens bent is found as a chain of short segments; their endpoints lie on
+    the bent edge, so undone they lie on the straight one."""
+    s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
+    if k == 0.0 or len(s) == 0:
+        return s
+    r = half_diagonal(width, height)
+    return cv2.undistortPoints(s.reshape(-1, 1, 2), camera_matrix(width, height, r),
+                               _coeffs((k,)), P=camera_matrix(width, height, r)).reshape(-1, 4)
+
+
+def straightness_cost(segments: np.ndarray, width: int, height: int, focal_px: float,
+                      params: VPParams | None = None,
+                      weights: np.ndarray | None = None) -> float:
+    """How badly ``segments`` (N×4, pixels) point at the room's layout VPs: the weighted
+    mean squared angle (degrees²) of each segment to the nearest observed VP found among
+    them, each angle truncated at :data:`STRAIGHTNESS_CAP_DEG`. ``weights`` (N) default to
+    the segments' lengths.
+
+    Under the right lens model the room's edges, undone, meet at three points; under a
+    wrong one the edges far from the centre tilt away from them."""
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    lengths = segment_lengths(s) if weights is None else np.asarray(weights, dtype=float)
+    if lengths.sum() <= 0:
+        return float(STRAIGHTNESS_CAP_DEG ** 2)
+    p = params or VPParams()
+    layout = detect_layout_vps(s, width, height, focal_px, p)
+    observed = layout.vps[np.array(layout.observed)]
+    if len(observed) == 0:
+        return float(STRAIGHTNESS_CAP_DEG ** 2)
+    any_angle = VPParams(max_angle_deg=90.0, residual_px=float("inf"))
+    _, angle = assign_segments(s, observed, any_angle)
+    a = np.minimum(angle, STRAIGHTNESS_CAP_DEG)
+    return float(np.sum(lengths * a * a) / lengths.sum())
+
+
+def radial_k(segments: np.ndarray, width: int, height: int, focal_px: float,
+             params: VPParams | None = None) -> float | None:
+    """One frame's estimate of the lens's radial coefficient (half-diagonal normalised):
+    the ``k`` whose undone segments have the least :func:`straightness_cost`, searched over
+    :data:`RADIAL_K_COARSE`, then every :data:`RADIAL_K_STEP` within half a coarse step of
+    the best.
+
+    Inputs: ``segments`` N×4 pixels as detected in the frame, its size, a focal length
+    (pixels; a guess is enough, it only sets how the VP stage checks orthogonality).
+    Output: ``k`` (0 for a pinhole; < 0 barrel; of equally good ones the nearest 0), None
+    when no ``k`` shows the room's layout. One frame holds little bend: on a
+    video, the median of several frames' estimates is the lens
+    (:class:`~companion.vision.pipeline.RunningLens`).
+    """
+    s = np.asarray(segments, dtype=float).reshape(-1, 4)
+    # Weighted by their lengths as seen: undoing a strong barrel stretches the border's
+    # segments into near-radial lines that all point at the centre.
+    lengths = segment_lengths(s)
+
+    def cost(k: float) -> float:
+        return straightness_cost(undistort_segments(s, width, height, k), width, height,
+                                 focal_px, params, lengths)
+
+    costs = {k: cost(k) for k in RADIAL_K_COARSE}
+    if len(set(costs.values())) == 1:
+        return None
+
+    def rank(k: float) -> tuple[float, float]:
+        return costs[k], abs(k)
+
+    best = min(costs, key=rank)
+    half = abs(RADIAL_K_COARSE[1] - RADIAL_K_COARSE[0]) / 2.0
+    n = int(half / RADIAL_K_STEP + 1e-9)
+    for k in (round(best + i * RADIAL_K_STEP, 3) for i in range(-n, n + 1)):
+        if k not in costs:
+            costs[k] = cost(k)
+    return float(min(costs, key=rank))

@@ -27,14 +27,14 @@ from companion.vision.corners import (
 )
 from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
-from companion.vision.lens import undistort_maps
+from companion.vision.lens import half_diagonal, radial_k, undistort_maps
 from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
 from companion.vision.obstacles import Obstacle, find_obstacles
 from companion.vision.ranging import FloorContact, floor_contacts, path_distance
 from companion.vision.tracking import Track, update_track
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
 
-__all__ = ["Estimate", "Pipeline", "RunningFocal", "STAGES"]
+__all__ = ["Estimate", "Pipeline", "RunningFocal", "RunningLens", "STAGES"]
 
 STAGES = ("lines", "vps", "corners", "obstacles", "heading")
 
@@ -67,6 +67,14 @@ it implies is within this share of the estimate; else it calibrates itself"""
 FOCAL_WARMUP = 5
 """estimates gathered by full per-frame self-calibration before the running estimate is
 trusted as the one guess a frame is searched with"""
+
+
+LENS_FRAMES = 9
+"""frames whose lens estimates (:func:`~companion.vision.lens.radial_k`) the video's lens is
+the median of; from the next frame on it is undone, and no longer estimated"""
+
+LENS_MIN_K = 0.03
+"""a video's lens whose coefficient is smaller than this is a pinhole: nothing is undone"""
 
 
 def _room_eta(layout: LayoutVPs, centre: np.ndarray, depth_px: float) -> float | None:
@@ -102,6 +110,35 @@ class RunningFocal:
 
     def add(self, focal_px: float) -> RunningFocal:
         return RunningFocal((self.estimates_px + (float(focal_px),))[-FOCAL_MEMORY:])
+
+
+@dataclass(frozen=True)
+class RunningLens:
+    """The radial distortion of one video's lens, estimated on its first frames.
+
+    ``estimates_k``: per-frame estimates of the half-diagonal normalised coefficient
+    (:func:`~companion.vision.lens.radial_k`), oldest first. Their median is the lens once
+    :data:`LENS_FRAMES` frames gave one: a single frame holds too little bend to tell,
+    but a frame fooled by a curved or cluttered view is one vote among several. Pure
+    value: :meth:`add` returns a new one.
+    """
+
+    estimates_k: tuple[float, ...] = ()
+
+    @property
+    def settled(self) -> bool:
+        return len(self.estimates_k) >= LENS_FRAMES
+
+    @property
+    def k(self) -> float | None:
+        """The lens's coefficient once settled (0.0 for a pinhole), else None."""
+        if not self.settled:
+            return None
+        k = float(np.median(self.estimates_k))
+        return k if abs(k) >= LENS_MIN_K else 0.0
+
+    def add(self, k: float) -> RunningLens:
+        return RunningLens(self.estimates_k + (float(k),))
 
 
 def _support(layout: LayoutVPs) -> float:
@@ -203,7 +240,9 @@ class Pipeline:
         self.running_focal = RunningFocal()
         self.track: Track | None = None
         self._vision: dict[tuple[int, int], VisionConfig] = {}
-        self._lens_maps: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._lens_maps: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+        self.running_lens = RunningLens()
+        self._lens_size: tuple[int, int] | None = None
         self._focal_size: tuple[int, int] | None = None
         vp = self.config.vision.vanishing
         self._known_focal_vp = replace(
@@ -302,18 +341,42 @@ class Pipeline:
         return self.running_focal.focal_px or width / 2.0
 
     def pinhole(self, frame: np.ndarray) -> np.ndarray:
-        """The frame as every stage sees it: with ``camera.distortion`` configured, the
-        lens's distortion undone (:mod:`~companion.vision.lens`; same size and focal
-        length), else the frame itself. Pixel positions in an :class:`Estimate` are
-        positions in this picture."""
+        """The frame as every stage sees it: the lens's distortion undone
+        (:mod:`~companion.vision.lens`; same size and focal length), else the frame
+        itself. The lens is ``camera.distortion`` when given (``[0]``: a pinhole), else
+        this video's :class:`RunningLens` once it has settled. Pixel positions in an
+        :class:`Estimate` are positions in this picture."""
         cam = self.config.camera
-        if not cam.distortion:
-            return frame
         h, w = frame.shape[:2]
-        if (w, h) not in self._lens_maps:
-            self._lens_maps[(w, h)] = undistort_maps(w, h, cam.focal_px, cam.distortion)
-        mx, my = self._lens_maps[(w, h)]
+        if cam.distortion is not None:
+            if not any(cam.distortion):
+                return frame
+            key = (w, h, cam.focal_px, tuple(cam.distortion))
+            focal, coeffs = cam.focal_px, cam.distortion
+        else:
+            k = self.running_lens.k if self._lens_size == (w, h) else None
+            if not k:
+                return frame
+            key = (w, h, k)
+            focal, coeffs = half_diagonal(w, h), (k,)
+        if key not in self._lens_maps:
+            self._lens_maps[key] = undistort_maps(w, h, focal, coeffs)
+        mx, my = self._lens_maps[key]
         return cv2.remap(frame, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+    def _learn_lens(self, segments: np.ndarray, w: int, h: int) -> None:
+        """Add this frame's estimate to the video's lens, while it is being estimated: the
+        lens was not given and has not settled. Segments as detected in the raw frame."""
+        if self.config.camera.distortion is not None:
+            return
+        if self._lens_size != (w, h):  # another camera
+            self._lens_size, self.running_lens = (w, h), RunningLens()
+        if self.running_lens.settled:
+            return
+        focal = self.config.camera.focal_px or self.running_focal.focal_px or w / 2.0
+        k = radial_k(segments, w, h, focal, self.config.vision.vanishing)
+        if k is not None:
+            self.running_lens = self.running_lens.add(k)
 
     def segments(self, frame: np.ndarray) -> np.ndarray:
         """Stage 1: the frame's line segments (N×4 pixels), filtered and capped."""
@@ -370,6 +433,7 @@ class Pipeline:
         t0 = time.perf_counter()
         gray = self.pinhole(to_gray(frame))
         all_segments, segments = self._segments(gray)
+        self._learn_lens(all_segments, w, h)
         t1 = time.perf_counter()
         ms["lines"] = (t1 - t0) * 1e3
 
