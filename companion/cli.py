@@ -192,6 +192,9 @@ def dry_run(args) -> int:
     history = TurnHistory()
     try:
         for frame in video:
+            # The picture this frame's estimate is made in (lens undone, once it is known),
+            # taken before the frame is processed: processing it may settle the lens.
+            picture = pipeline.pinhole(frame.image) if writer is not None else None
             t0 = time.perf_counter()
             est = pipeline(frame.image)
             _, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, cfg.policy,
@@ -201,7 +204,7 @@ def dry_run(args) -> int:
             if log:
                 log.write(log_record(frame.index, frame.t_s, est, cmd, latency_ms, frame.source))
             if writer is not None:
-                out = annotate(pipeline.pinhole(frame.image), est, cmd)
+                out = annotate(picture, est, cmd)
                 if out.shape[:2] != (video.height, video.width):
                     out = cv2.resize(out, (video.width, video.height))
                 writer.write(out)
