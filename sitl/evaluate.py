@@ -245,8 +245,10 @@ def evaluate_scene(
     cfg = config or Config()
     lens = assume_lens and bool(truth.distortion)
     if assume_focal or assume_lens:
+        # The lens given: the renderer's, or a pinhole for one that draws none.
+        given = (truth.distortion or (0.0,)) if assume_lens else cfg.camera.distortion
         cfg = replace(cfg, camera=replace(cfg.camera, focal_px=truth.focal_px,
-                                          distortion=truth.distortion if lens else None))
+                                          distortion=given))
     est = Pipeline(cfg)(image, camera_height_m=truth.camera_height_m)
 
     def in_frame(points_px):

@@ -150,3 +150,9 @@ def test_the_video_lens_is_the_median_of_its_first_frames_and_a_weak_one_is_a_pi
     assert lens.settled and lens.k == pytest.approx(-0.05)  # two wild frames outvoted
     weak = RunningLens((-0.02,) * LENS_FRAMES)
     assert weak.k == 0.0  # within the estimate's own bias: left alone
+
+
+def test_a_lens_without_its_focal_length_is_refused():
+    with pytest.raises(ValueError, match="needs camera.focal_px"):
+        Pipeline(replace(Config(), camera=replace(Config().camera, distortion=(-0.1,))))
+    Pipeline(replace(Config(), camera=replace(Config().camera, distortion=(0.0,))))  # pinhole

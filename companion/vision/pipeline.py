@@ -236,6 +236,10 @@ class Pipeline:
 
     def __init__(self, config: Config | None = None):
         self.config = config or Config()
+        cam = self.config.camera
+        if cam.distortion and any(cam.distortion) and not cam.focal_px:
+            raise ValueError("camera.distortion needs camera.focal_px: its coefficients are "
+                             "relative to the focal length")
         self._detectors: dict[float, object] = {}
         self.running_focal = RunningFocal()
         self.track: Track | None = None
