@@ -222,11 +222,8 @@ def dry_run(args) -> int:
     wall = time.perf_counter() - start
     for line in summary.lines(wall):
         print(line)
-    lens = pipeline.running_lens
-    if lens.settled:
-        print(f"lens: radial k {lens.k:+.2f} on the half-diagonal, learnt on the first "
-              f"{len(lens.estimates_k)} frames; "
-              + ("undone from there" if lens.k else "a pinhole, nothing undone"))
+    if pipeline.running_lens.settled:
+        print(pipeline.running_lens.describe())
     if args.log:
         print(f"log: {args.log}")
     if args.annotate:

@@ -82,6 +82,7 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
                  health: _Health, stop: threading.Event, decisions: logging.Logger | None):
     pipeline = Pipeline(config)
     history = TurnHistory()
+    lens_told = False
     while not stop.is_set():
         frame = frames.get(timeout_s=0.2)
         if frame is None:
@@ -89,6 +90,9 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
                 return
             continue
         est = pipeline(frame.image, camera_height_m=controller.camera_height_m())
+        if pipeline.running_lens.settled and not lens_told:
+            log.info("%s", pipeline.running_lens.describe())
+            lens_told = True
         eta, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, config.policy,
                                          history, est.scene_understood, est.range_m)
         controller.submit(cmd, eta, t_s=frame.captured_s,

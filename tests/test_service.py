@@ -22,6 +22,7 @@ from companion.capture import CaptureError, ImageFolder, LatestFrame, VideoFile,
 from companion.config import Config
 from companion.control.offboard import OffboardController
 from companion.notify import notify
+from companion.vision.pipeline import LENS_FRAMES
 from sitl.autopilot import OFFBOARD, AutopilotParams, MockAutopilot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -223,6 +224,9 @@ def test_companion_run_flies_the_mock_by_the_video_and_stops_on_sigterm(tmp_path
     assert any(line.startswith("STATUS=") and "fps" in line for line in lines)
     assert len(output.splitlines()) < len(records)  # no line per frame on stdout
     assert "Traceback" not in output
+    # The sample's lens is learnt on its first frames and told once, in the journal.
+    assert len(records) >= LENS_FRAMES
+    assert output.count("lens: radial k +0.00") == 1, output
 
 
 def test_run_refuses_a_bad_config_key_in_one_line(tmp_path):

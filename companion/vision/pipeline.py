@@ -140,6 +140,14 @@ class RunningLens:
     def add(self, k: float) -> RunningLens:
         return RunningLens(self.estimates_k + (float(k),))
 
+    def describe(self) -> str:
+        """One line for a person: what was learnt, and whether it is undone."""
+        if not self.settled:
+            return f"lens: not learnt yet ({len(self.estimates_k)} of {LENS_FRAMES} frames)"
+        return (f"lens: radial k {self.k:+.2f} on the half-diagonal, learnt on the first "
+                f"{len(self.estimates_k)} frames; "
+                + ("undone from there" if self.k else "a pinhole, nothing undone"))
+
 
 def _support(layout: LayoutVPs) -> float:
     """How strongly the segments back a layout: the support of its observed VPs (pixels)."""
