@@ -1,10 +1,12 @@
 """Frame → :class:`Estimate`: the paper's stages composed, each one timed (Fig. 1).
 
-lines (eq. 1) → layout VPs and segment labels (Fig. 2) → corner projections ranked by
-Λ (eqs. 2–4) → Table I → obstacles from corner pairs (eqs. 5–8) → M, η, φ (eqs. 9–11).
+(lens undone, :mod:`~companion.vision.lens`) → lines (eq. 1) → layout VPs and segment
+labels (Fig. 2) → corner projections ranked by Λ (eqs. 2–4) → Table I → obstacles from
+corner pairs (eqs. 5–8) → M, η, φ (eqs. 9–11).
 
-The stages are pure functions; :class:`Pipeline` only holds the configured line
-detector (built once) and measures how long each stage took.
+The stages are pure functions; :class:`Pipeline` holds the configured line detector
+(built once), what a video teaches about its camera (:class:`RunningFocal`,
+:class:`RunningLens`) and its obstacle's track, and measures how long each stage took.
 """
 
 from __future__ import annotations
