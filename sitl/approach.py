@@ -59,6 +59,7 @@ import numpy as np
 
 from companion.config import Config, MavlinkConfig
 from companion.control.policy import TurnHistory, decide_frame, wrap_deg
+from companion.vision.lens import distort_maps
 from sitl.scene import (
     Box,
     Camera,
@@ -274,10 +275,12 @@ def _policy_config(base: Config, ap: Approach, camera: Camera, focal_given: bool
 
 def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None,
                  autopilot_url: str | None = None, camera_hz: float = 5.0, width: int = 640,
-                 height: int = 480, base: Config | None = None, focal_given: bool = True
-                 ) -> RunResult:
+                 height: int = 480, base: Config | None = None, focal_given: bool = True,
+                 lens_k1: float = 0.0) -> RunResult:
     """Fly one drawn approach; against the lock-step mock on 127.0.0.1:``port``, or, with
-    ``autopilot_url``, against an autopilot that is already running (real time)."""
+    ``autopilot_url``, against an autopilot that is already running (real time). With
+    ``lens_k1`` every frame is taken through that radial lens (OpenCV's k1, focal length
+    normalised)."""
     from companion.control.offboard import OffboardController
     from companion.vision.pipeline import Pipeline
     from sitl.closed_loop import fly_alongside
@@ -285,6 +288,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     if policy not in POLICIES:
         raise ValueError(f"--policy {policy}: must be one of {', '.join(POLICIES)}")
     cam0 = Camera(width=width, height=height, hfov_deg=ap.hfov_deg)
+    lens = distort_maps(width, height, cam0.focal_px, (lens_k1,)) if lens_k1 else None
     mock = None
     if autopilot_url is None:
         from sitl.autopilot import AutopilotParams, MockAutopilot
@@ -393,6 +397,9 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             cam = replace(cam0, x=x, y=y, height_m=alt, yaw_deg=heading,
                           pitch_deg=pose.pitch_deg, roll_deg=pose.roll_deg)
             image = render_image(scene, cam, supersample=1) if policy == "paper" else None
+            if image is not None and lens is not None:
+                image = cv2.remap(image, *lens, cv2.INTER_LINEAR,
+                                  borderMode=cv2.BORDER_REPLICATE)
             t0 = time.perf_counter()  # the frame is taken: decide
             seen, tracked, understood, range_m, path_m = _observe(policy, scene, cam, pipeline,
                                                                   image)
@@ -670,6 +677,8 @@ def simulate_approach(args, progress=None) -> int:
         raise ValueError("--camera-hz must be between 0.5 and 60")
     if args.speed is not None and not 0.05 <= args.speed <= 5.0:
         raise ValueError("--speed must be between 0.05 and 5 m/s")
+    if not -0.2 <= args.lens <= 0.1:
+        raise ValueError("--lens must be between -0.2 and 0.1 (OpenCV's k1)")
     base = load_config(args.sim_config)
     started = time.perf_counter()
 
@@ -685,7 +694,7 @@ def simulate_approach(args, progress=None) -> int:
             args.runs, args.seed, args.policy, workers=max(1, args.workers), progress=report,
             autopilot_url=args.autopilot, camera_hz=args.camera_hz, width=args.width,
             height=args.height, base=base, focal_given=not args.no_focal,
-            speed_m_s=args.speed)
+            speed_m_s=args.speed, lens_k1=args.lens)
     except AutopilotNotFound as exc:
         raise ValueError(str(exc)) from None
     if progress is not None:
@@ -694,6 +703,7 @@ def simulate_approach(args, progress=None) -> int:
     for line in format_report(summary):
         print(line)
     speed = "" if args.speed is None else f" --speed {args.speed:g}"
+    speed += f" --lens {args.lens:g}" if args.lens else ""
     print(f"({time.perf_counter() - started:.0f} s; companion sim --scenario approach "
           f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{speed})")
     for r in summary["per_run"]:

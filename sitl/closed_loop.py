@@ -335,6 +335,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--speed", type=float, default=None, metavar="M_S",
                     help="approach: fly every run at this forward speed (default: drawn, "
                          "0.4-0.8 m/s)")
+    ap.add_argument("--lens", type=float, default=0.0, metavar="K1",
+                    help="approach: the camera's radial distortion, OpenCV's k1 on "
+                         "coordinates normalised by the focal length (< 0 barrel; default "
+                         "0, a pinhole): every frame is taken through it")
     ap.add_argument("--json", metavar="PATH", help="approach: write the figures as JSON")
     ap.add_argument("--config", metavar="PATH", dest="sim_config",
                     help="approach: YAML config for the companion (policy, offboard ...)")

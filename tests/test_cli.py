@@ -251,6 +251,8 @@ def test_bench_and_sim_reject_bad_arguments_in_one_line():
     _assert_one_line_error(run("bench", "--resolutions", "640by480", "--no-sitl"), "WxH")
     _assert_one_line_error(run("bench", "--latency-frames", "0"), "--latency-frames")
     _assert_one_line_error(run("sim", "--eta0", "120"), "between -89 and 89")
+    _assert_one_line_error(run("sim", "--scenario", "approach", "--lens", "-0.5"),
+                           "--lens must be between -0.2 and 0.1")
     _assert_one_line_error(run("eval", "--variants"), "--variants needs --yud")
     _assert_one_line_error(run("eval", "--lens-given"), "go with --renderer")
     _assert_one_line_error(run("eval", "--renderer", "scene", "--clips", "--lens-given"),

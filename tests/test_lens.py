@@ -8,7 +8,7 @@ import pytest
 
 from companion.config import Config
 from companion.vision.lens import (
-    camera_matrix,
+    distort_maps,
     distort_px,
     half_diagonal,
     radial_k,
@@ -20,17 +20,10 @@ from sitl.scene import Camera, render, yaw_sweep
 
 
 def through_lens(image: np.ndarray, focal_px: float, distortion) -> np.ndarray:
-    """The pinhole ``image`` as a camera with this lens takes it: each raw pixel reads the
-    pinhole pixel OpenCV's model undistorts it to."""
+    """The pinhole ``image`` as a camera with this lens takes it."""
     h, w = image.shape[:2]
-    k = camera_matrix(w, h, focal_px)
-    coeffs = np.zeros(5)
-    coeffs[: len(distortion)] = distortion
-    uv = np.stack(np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)),
-                  axis=-1)
-    src = cv2.undistortPoints(uv.reshape(-1, 1, 2), k, coeffs, P=k).reshape(h, w, 2)
-    return cv2.remap(image, src[..., 0], src[..., 1], cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_REPLICATE)
+    mx, my = distort_maps(w, h, focal_px, distortion)
+    return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
 def test_the_maps_read_each_pinhole_pixel_where_the_lens_put_it():

@@ -24,7 +24,7 @@ import numpy as np
 from companion.vision.geometry import principal_point, segment_lengths
 from companion.vision.vanishing import VPParams, assign_segments, detect_layout_vps
 
-__all__ = ["camera_matrix", "undistort_maps", "distort_px", "half_diagonal",
+__all__ = ["camera_matrix", "undistort_maps", "distort_maps", "distort_px", "half_diagonal",
            "undistort_segments", "straightness_cost", "radial_k"]
 
 RADIAL_K_COARSE = tuple(round(0.10 - 0.05 * i, 2) for i in range(15))
@@ -65,6 +65,19 @@ def undistort_maps(width: int, height: int, focal_px: float,
     k = camera_matrix(width, height, focal_px)
     return cv2.initUndistortRectifyMap(k, _coeffs(distortion), None, k, (width, height),
                                        cv2.CV_16SC2)
+
+
+def distort_maps(width: int, height: int, focal_px: float,
+                 distortion) -> tuple[np.ndarray, np.ndarray]:
+    """The other way from :func:`undistort_maps`: maps for ``cv2.remap`` that take a pinhole
+    picture through the lens, as a camera with it would (for simulations and tests).
+    Returns float32 maps: for each pixel of the lens's frame, the pinhole pixel it shows."""
+    k = camera_matrix(width, height, focal_px)
+    uv = np.stack(np.meshgrid(np.arange(width, dtype=np.float32),
+                              np.arange(height, dtype=np.float32)), axis=-1)
+    src = cv2.undistortPoints(uv.reshape(-1, 1, 2), k, _coeffs(distortion), P=k)
+    src = src.reshape(height, width, 2)
+    return np.ascontiguousarray(src[..., 0]), np.ascontiguousarray(src[..., 1])
 
 
 def distort_px(points: np.ndarray, width: int, height: int, focal_px: float,
