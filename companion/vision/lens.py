@@ -29,10 +29,11 @@ __all__ = ["camera_matrix", "undistort_maps", "distort_maps", "distort_px", "hal
 
 RADIAL_K_COARSE = tuple(round(0.10 - 0.05 * i, 2) for i in range(15))
 """the radial coefficients (half-diagonal normalised) :func:`radial_k` tries first: from a
-mild pincushion to the barrel of a 120° action-camera lens"""
+mild pincushion (+0.10) to a strong barrel (−0.60: a pinhole point at the end of the
+half-diagonal is drawn 60 % of the way in)"""
 
 RADIAL_K_STEP = 0.01
-"""then every this much within one coarse step of the best"""
+"""then every this much within half a coarse step of the best"""
 
 STRAIGHTNESS_CAP_DEG = 2.0
 """a segment further than this from every layout VP counts as this far (not room)"""
