@@ -94,6 +94,9 @@ def _parser() -> argparse.ArgumentParser:
                          "diagnosis; the targets are without it)")
     ev.add_argument("--clips", action="store_true",
                     help="with --renderer: per-frame and tracked η on yawing clips")
+    ev.add_argument("--long", action="store_true",
+                    help="with --clips: 24-frame clips, long enough to learn the lens, also "
+                         "scored from frame 12 on")
     ev.add_argument("--split", choices=("dev", "train", "test", "all"), default=None,
                     help="with --renderer: dev, test or all (default all); with --yud: train "
                          "(= dev), test (default) or all. Tune on dev/train only")
@@ -246,6 +249,8 @@ def run_eval(args) -> int:
         return run_eval_splits(args)
     if args.split:
         raise UserError("--split needs --renderer NAME or --yud DIR")
+    if args.long:
+        raise UserError("--long goes with --renderer NAME --clips")
     if args.focal_given or args.lens_given:
         raise UserError("--focal-given and --lens-given go with --renderer NAME (without "
                         "it, the focal length is given unless --no-focal)")
@@ -294,6 +299,8 @@ def run_eval_splits(args) -> int:
     splits = ("dev", "test") if split == "all" else (split,)
     cfg = _config(args.eval_config, None)
     start = time.perf_counter()
+    if args.long and not args.clips:
+        raise UserError("--long goes with --clips")
     if args.clips:
         if args.focal_given or args.lens_given:
             raise UserError("--clips estimates the focal length as a video does; "
@@ -328,7 +335,7 @@ def run_eval_splits(args) -> int:
 
 
 def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
-    from sitl.evaluate import clip_figures, format_clips, run_clips
+    from sitl.evaluate import LATE_FRAME, clip_figures, format_clips, run_clips
 
     figures = {}
     for renderer in renderers:
@@ -338,16 +345,23 @@ def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
             try:
                 by_split[s] = run_clips(s, cfg, args.workers,
                                         lambda d, t, p=progress, r=renderer, s=s: p.update(
-                                            d, t, f"{r} clips {s}"), renderer=renderer)
+                                            d, t, f"{r} clips {s}"), renderer=renderer,
+                                        long=args.long)
             finally:
                 progress.close()
-        for line in format_clips(by_split, renderer):
+        for line in format_clips(by_split, renderer, args.long):
             print(line)
         figures[renderer] = {s: {"per_frame": clip_figures(fr, False),
                                  "tracked": clip_figures(fr, True)}
                              for s, fr in by_split.items()}
+        if args.long:
+            for s, fr in by_split.items():
+                late = [r for r in fr if r.frame >= LATE_FRAME]
+                figures[renderer][s].update(late_per_frame=clip_figures(late, False),
+                                            late_tracked=clip_figures(late, True))
     print(f"({time.perf_counter() - start:.0f} s; companion eval --renderer {args.renderer}"
-          " --clips" + (f" --split {splits[0]})" if len(splits) == 1 else ")"))
+          " --clips" + (" --long" if args.long else "")
+          + (f" --split {splits[0]})" if len(splits) == 1 else ")"))
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)

@@ -445,6 +445,19 @@ CLIPS = {
 }
 """(seed, clips) of each renderer's frozen tracking splits. Never tune on ``test``."""
 
+LONG_CLIPS = {
+    ("scene", "dev"): (30, 20),
+    ("scene", "test"): (9030, 20),
+    ("pathtraced", "dev"): (31, 8),
+    ("pathtraced", "test"): (9031, 8),
+}
+"""(seed, clips) of the long clips (:data:`LONG_CLIP_FRAMES` frames): long enough for a
+video to learn its lens (``pipeline.LENS_FRAMES``) and fly on with it undone."""
+
+LONG_CLIP_FRAMES = 24
+LATE_FRAME = 12
+"""long clips are also scored on their frames from this one on: after the lens is learnt"""
+
 CLIP_FRAMES = 10
 CLIP_FPS = 10.0
 """frame rate of a clip: the yaw between frames makes the motion blur within one"""
@@ -507,13 +520,16 @@ def _clip_worker(args):
 
 
 def run_clips(split: str, config: Config | None = None, workers: int | None = None,
-              progress=None, renderer: str = "scene") -> list[FrameResult]:
-    """Every clip of a renderer's frozen tracking split (:data:`CLIPS`)."""
-    seed, clips = CLIPS[(renderer, split)]
+              progress=None, renderer: str = "scene", long: bool = False
+              ) -> list[FrameResult]:
+    """Every clip of a renderer's frozen tracking split (:data:`CLIPS`, or with ``long``
+    :data:`LONG_CLIPS`)."""
+    seed, clips = (LONG_CLIPS if long else CLIPS)[(renderer, split)]
+    frames = LONG_CLIP_FRAMES if long else CLIP_FRAMES
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
     out: list[FrameResult] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = [(seed, i, config, 0.7, CLIP_FRAMES, renderer) for i in range(clips)]
+        jobs = [(seed, i, config, 0.7, frames, renderer) for i in range(clips)]
         for k, frames in enumerate(pool.map(_clip_worker, jobs)):
             out.extend(frames)
             if progress:
@@ -548,21 +564,28 @@ def clip_figures(frames: list[FrameResult], tracked: bool) -> dict[str, float | 
     }
 
 
-def format_clips(by_split: dict[str, list[FrameResult]], renderer: str = "scene") -> list[str]:
+def format_clips(by_split: dict[str, list[FrameResult]], renderer: str = "scene",
+                 long: bool = False) -> list[str]:
     lens = "90° lens" if renderer == "scene" else "50–110° lenses"
+    n = LONG_CLIP_FRAMES if long else CLIP_FRAMES
     lines = [f"tracking, renderer {renderer}, {lens}, focal length not given: "
-             f"{CLIP_FRAMES}-frame yawing clips; η error modulo 90° (to the nearest face), "
-             "sign✗ where 1° <= |η_truth| <= 40°",
-             f"{'split':<5} {'η':<9} {'det %':>6} {'η med°':>7} {'η p90°':>7} {'FP %':>5} "
+             f"{n}-frame yawing clips; η error modulo 90° (to the nearest face), "
+             "sign✗ where 1° <= |η_truth| <= 40°"
+             + (f"; 'late': frames {LATE_FRAME}–{n - 1}, the lens learnt" if long else ""),
+             f"{'split':<5} {'η':<15} {'det %':>6} {'η med°':>7} {'η p90°':>7} {'FP %':>5} "
              f"{'sign✗':>8}"]
+    rows = [("per frame", False, False), ("tracked", True, False)]
+    if long:
+        rows += [("late, per frame", False, True), ("late, tracked", True, True)]
     for split, frames in by_split.items():
-        for name, tracked in (("per frame", False), ("tracked", True)):
-            f = clip_figures(frames, tracked)
+        for name, tracked, late in rows:
+            f = clip_figures([r for r in frames if r.frame >= LATE_FRAME] if late else frames,
+                             tracked)
 
             def num(x, scale=1.0, fmt=".2f"):
                 return "n/a" if x is None else format(scale * x, fmt)
             lines.append(
-                f"{split:<5} {name:<9} {num(f['detection_rate'], 100, '.1f'):>6} "
+                f"{split:<5} {name:<15} {num(f['detection_rate'], 100, '.1f'):>6} "
                 f"{num(f['eta_err_median_deg']):>7} {num(f['eta_err_p90_deg']):>7} "
                 f"{num(f['false_positive_rate'], 100, '.1f'):>5} "
                 f"{str(f['sign_wrong']) + '/' + str(f['signed']):>8}")

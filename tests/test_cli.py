@@ -255,6 +255,7 @@ def test_bench_and_sim_reject_bad_arguments_in_one_line():
                            "--lens must be between -0.2 and 0.1")
     _assert_one_line_error(run("eval", "--variants"), "--variants needs --yud")
     _assert_one_line_error(run("eval", "--lens-given"), "go with --renderer")
+    _assert_one_line_error(run("eval", "--renderer", "scene", "--long"), "--long goes with --clips")
     _assert_one_line_error(run("eval", "--renderer", "scene", "--clips", "--lens-given"),
                            "are for the splits")
 
