@@ -1094,12 +1094,12 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                     if reach[g] < 2 * p.min_edge_px or not horizon_ovps(
                             &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3):
                         continue
-                    pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
-                    pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
-                    if not at_border(&fr, far[g, 0], far[g, 1], p.radius_px) and room_edge_at(
-                            s, lengths, (pc[g, 0], pc[g, 1], far[g, 0], far[g, 1], reach[g]),
-                            room_idx, o1, o2, &p, False):
-                        continue
+                    if not at_border(&fr, far[g, 0], far[g, 1], p.radius_px):
+                        pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+                        pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
+                        if room_edge_at(s, lengths, (pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
+                                                     reach[g]), room_idx, o1, o2, &p, False):
+                            continue
                 h = new_hypothesis(&found)
                 set_ovps(h, d1, d2, lam3, reach[g])
                 h.corner = g
