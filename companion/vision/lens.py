@@ -83,20 +83,19 @@ def distort_maps(width: int, height: int, focal_px: float,
 
 def distort_px(points: np.ndarray, width: int, height: int, focal_px: float,
                distortion) -> np.ndarray:
-    """Where the raw frame shows pinhole pixels: OpenCV's forward model.
+    """Where the raw frame shows pinhole pixels: OpenCV's forward model
+    (``cv2.projectPoints`` of the rays through them).
 
     Inputs: ``points`` N×2 pixels of the pinhole picture; the camera as for
     :func:`undistort_maps`. Output: N×2 pixels of the frame taken through the lens.
     """
     p = np.asarray(points, dtype=float).reshape(-1, 2)
-    k1, k2, p1, p2, k3 = _coeffs(distortion)
-    c = principal_point(width, height)
-    x, y = ((p - c) / focal_px).T
-    r2 = x * x + y * y
-    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    return np.stack([xd, yd], axis=1) * focal_px + c
+    if len(p) == 0:
+        return p
+    rays = np.column_stack([(p - principal_point(width, height)) / focal_px, np.ones(len(p))])
+    seen, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3),
+                                camera_matrix(width, height, focal_px), _coeffs(distortion))
+    return seen.reshape(-1, 2)
 
 
 def half_diagonal(width: int, height: int) -> float:
@@ -113,9 +112,8 @@ def undistort_segments(segments: np.ndarray, width: int, height: int, k: float) 
     s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
     if k == 0.0 or len(s) == 0:
         return s
-    r = half_diagonal(width, height)
-    return cv2.undistortPoints(s.reshape(-1, 1, 2), camera_matrix(width, height, r),
-                               _coeffs((k,)), P=camera_matrix(width, height, r)).reshape(-1, 4)
+    cam = camera_matrix(width, height, half_diagonal(width, height))
+    return cv2.undistortPoints(s.reshape(-1, 1, 2), cam, _coeffs((k,)), P=cam).reshape(-1, 4)
 
 
 def straightness_cost(segments: np.ndarray, width: int, height: int, focal_px: float,
