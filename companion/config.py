@@ -31,6 +31,7 @@ __all__ = [
     "PolicyConfig",
     "load_config",
     "from_mapping",
+    "check_lens",
 ]
 
 
@@ -171,10 +172,16 @@ def load_config(path: str | Path | None) -> Config:
 def from_mapping(data: Any, source: str = "<config>") -> Config:
     """Build and validate a :class:`Config` from nested mappings (as parsed from YAML)."""
     cfg = _build(Config, data, source, "")
-    if cfg.camera.distortion and any(cfg.camera.distortion) and not cfg.camera.focal_px:
+    check_lens(cfg.camera, source)
+    return cfg
+
+
+def check_lens(camera: CameraConfig, source: str = "<config>") -> None:
+    """Raise :class:`ConfigError` for distortion coefficients without the focal length
+    they are relative to (``[0]``, a pinhole, needs none)."""
+    if camera.distortion and any(camera.distortion) and not camera.focal_px:
         raise ConfigError(f"{source}: camera.distortion needs camera.focal_px (its "
                           "coefficients are relative to the focal length)")
-    return cfg
 
 
 def _build(cls: type, data: Any, source: str, prefix: str):

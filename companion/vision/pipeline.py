@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from companion.config import Config, VisionConfig
+from companion.config import Config, VisionConfig, check_lens
 from companion.vision.corners import (
     Corners,
     find_corners,
@@ -246,10 +246,7 @@ class Pipeline:
 
     def __init__(self, config: Config | None = None):
         self.config = config or Config()
-        cam = self.config.camera
-        if cam.distortion and any(cam.distortion) and not cam.focal_px:
-            raise ValueError("camera.distortion needs camera.focal_px: its coefficients are "
-                             "relative to the focal length")
+        check_lens(self.config.camera)  # a Config built in code skips from_mapping's check
         self._detectors: dict[float, object] = {}
         self.running_focal = RunningFocal()
         self.track: Track | None = None
