@@ -335,7 +335,7 @@ def run_eval_splits(args) -> int:
 
 
 def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
-    from sitl.evaluate import LATE_FRAME, clip_figures, format_clips, run_clips
+    from sitl.evaluate import clip_figures, format_clips, late_frames, run_clips
 
     figures = {}
     for renderer in renderers:
@@ -356,7 +356,7 @@ def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
                              for s, fr in by_split.items()}
         if args.long:
             for s, fr in by_split.items():
-                late = [r for r in fr if r.frame >= LATE_FRAME]
+                late = late_frames(fr)
                 figures[renderer][s].update(late_per_frame=clip_figures(late, False),
                                             late_tracked=clip_figures(late, True))
     print(f"({time.perf_counter() - start:.0f} s; companion eval --renderer {args.renderer}"

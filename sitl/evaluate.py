@@ -525,16 +525,21 @@ def run_clips(split: str, config: Config | None = None, workers: int | None = No
     """Every clip of a renderer's frozen tracking split (:data:`CLIPS`, or with ``long``
     :data:`LONG_CLIPS`)."""
     seed, clips = (LONG_CLIPS if long else CLIPS)[(renderer, split)]
-    frames = LONG_CLIP_FRAMES if long else CLIP_FRAMES
+    length = LONG_CLIP_FRAMES if long else CLIP_FRAMES
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
     out: list[FrameResult] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = [(seed, i, config, 0.7, frames, renderer) for i in range(clips)]
+        jobs = [(seed, i, config, 0.7, length, renderer) for i in range(clips)]
         for k, frames in enumerate(pool.map(_clip_worker, jobs)):
             out.extend(frames)
             if progress:
                 progress(k + 1, clips)
     return out
+
+
+def late_frames(frames: list[FrameResult]) -> list[FrameResult]:
+    """The frames of long clips from :data:`LATE_FRAME` on: after the lens is learnt."""
+    return [r for r in frames if r.frame >= LATE_FRAME]
 
 
 def clip_figures(frames: list[FrameResult], tracked: bool) -> dict[str, float | int | None]:
@@ -579,8 +584,7 @@ def format_clips(by_split: dict[str, list[FrameResult]], renderer: str = "scene"
         rows += [("late, per frame", False, True), ("late, tracked", True, True)]
     for split, frames in by_split.items():
         for name, tracked, late in rows:
-            f = clip_figures([r for r in frames if r.frame >= LATE_FRAME] if late else frames,
-                             tracked)
+            f = clip_figures(late_frames(frames) if late else frames, tracked)
 
             def num(x, scale=1.0, fmt=".2f"):
                 return "n/a" if x is None else format(scale * x, fmt)
