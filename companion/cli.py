@@ -225,7 +225,7 @@ def dry_run(args) -> int:
     wall = time.perf_counter() - start
     for line in summary.lines(wall):
         print(line)
-    if pipeline.running_lens.settled:
+    if pipeline.config.camera.distortion is None:  # the lens was to be learnt
         print(pipeline.running_lens.describe())
     if args.log:
         print(f"log: {args.log}")

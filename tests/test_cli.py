@@ -49,6 +49,8 @@ def test_dry_run_writes_exact_log_records(sample_video, tmp_path):
     assert sum(rec["eta_deg"] is not None for rec in records) >= 5
     assert "frames: 6" in r.stdout
     assert "latency: median" in r.stdout
+    # Six frames are too few to learn the lens from: the summary says so.
+    assert "lens: not learnt, 6 of the 9 frames it needs" in r.stdout
     assert "Traceback" not in r.stderr
 
 

@@ -145,7 +145,8 @@ class RunningLens:
     def describe(self) -> str:
         """One line for a person: what was learnt, and whether it is undone."""
         if not self.settled:
-            return f"lens: not learnt yet ({len(self.estimates_k)} of {LENS_FRAMES} frames)"
+            return (f"lens: not learnt, {len(self.estimates_k)} of the {LENS_FRAMES} frames it "
+                    "needs; frames taken as they are")
         return (f"lens: radial k {self.k:+.2f} on the half-diagonal, learnt on the first "
                 f"{len(self.estimates_k)} frames; "
                 + ("undone from there" if self.k else "a pinhole, nothing undone"))
