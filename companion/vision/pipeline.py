@@ -342,15 +342,15 @@ class Pipeline:
             return unconfirmed, "estimated"
         return first, "assumed"
 
+    def focal_for(self, width: int) -> float:
+        """The focal length in pixels: given, else this video's running estimate, else half
+        the width."""
+        return self.config.camera.focal_px or self.running_focal.focal_px or width / 2.0
+
     def depth_for(self, width: int) -> float:
         """D of eq. 10 in pixels: ``heading.depth_px`` if set, else the focal length
-        (given, else this video's running estimate, else half the width). Only with
-        D = f is η the bearing of the obstacle face."""
-        if self.config.heading.depth_px:
-            return self.config.heading.depth_px
-        if self.config.camera.focal_px:
-            return self.config.camera.focal_px
-        return self.running_focal.focal_px or width / 2.0
+        (:meth:`focal_for`). Only with D = f is η the bearing of the obstacle face."""
+        return self.config.heading.depth_px or self.focal_for(width)
 
     def pinhole(self, frame: np.ndarray) -> np.ndarray:
         """The frame as every stage sees it: the lens's distortion undone
@@ -385,8 +385,7 @@ class Pipeline:
             self._lens_size, self.running_lens = (w, h), RunningLens()
         if self.running_lens.settled:
             return
-        focal = self.config.camera.focal_px or self.running_focal.focal_px or w / 2.0
-        k = radial_k(segments, w, h, focal, self.config.vision.vanishing)
+        k = radial_k(segments, w, h, self.focal_for(w), self.config.vision.vanishing)
         if k is not None:
             self.running_lens = self.running_lens.add(k)
 
