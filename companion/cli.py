@@ -176,8 +176,10 @@ def dry_run(args) -> int:
             raise UserError(f"cannot write annotated video {args.annotate}")
     if cfg.camera.focal_px:
         focal = f"focal {cfg.camera.focal_px:g} px (given)"
-        if cfg.camera.distortion:
-            focal += ", lens distortion undone"
+        if cfg.camera.distortion is not None:
+            # [0] declares a pinhole: nothing is undone, and the lens is not estimated.
+            focal += (", lens distortion undone" if any(cfg.camera.distortion)
+                      else ", a pinhole lens (nothing undone)")
     else:
         focal = ("focal length estimated from the layout VPs, carried from frame to frame "
                  "(half the width until a frame gives it); D of eq. 10 = that focal length")

@@ -90,6 +90,12 @@ def test_a_calibrated_lens_runs_and_annotates_the_pinhole_picture(sample_video, 
     cap = cv2.VideoCapture(str(out))
     ok, first = cap.read()
     assert ok and first.shape[:2] == (480, 640)
+    # [0] declares a pinhole: nothing is undone, and the header says so.
+    cfg.write_text("camera:\n  focal_px: 381\n  distortion: [0]\n")
+    r = run("--video", video, "--dry-run", "--config", cfg)
+    assert r.returncode == 0, r.stderr
+    assert "focal 381 px (given), a pinhole lens (nothing undone)" in r.stdout
+    assert "distortion undone" not in r.stdout
     # Without the focal length the coefficients mean nothing: refused in one line.
     cfg.write_text("camera:\n  distortion: [-0.05]\n")
     _assert_one_line_error(run("--video", video, "--dry-run", "--config", cfg),
