@@ -702,10 +702,10 @@ def simulate_approach(args, progress=None) -> int:
     summary = summarize(results, args.policy, args.seed)
     for line in format_report(summary):
         print(line)
-    speed = "" if args.speed is None else f" --speed {args.speed:g}"
-    speed += f" --lens {args.lens:g}" if args.lens else ""
+    options = "" if args.speed is None else f" --speed {args.speed:g}"
+    options += f" --lens {args.lens:g}" if args.lens else ""
     print(f"({time.perf_counter() - started:.0f} s; companion sim --scenario approach "
-          f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{speed})")
+          f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{options})")
     for r in summary["per_run"]:
         if r["outcome"] == "error":
             print(f"run {r['run']}: error: {r['detail']}")
