@@ -68,6 +68,9 @@ class VisionConfig:
     max_segments: int = field(default=300, metadata=_range(10, 5000))
     edge_threshold: float = field(default=20.0, metadata=_range(1.0, 255.0))
     validate_segments: bool = False
+    refine_segments: bool = False
+    """each segment moved onto its edge's gradient peak, sub-pixel (vision/lines.py);
+    off: on real photographs it did not help the layout (docs/evaluation.md)"""
     vanishing: VPParams = field(default_factory=VPParams)
     corners: CornerParams = field(default_factory=CornerParams)
     obstacles: ObstacleParams = field(default_factory=ObstacleParams)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from companion.config import Config
-from companion.vision.lines import extend_segments, make_detector
+from companion.vision.lines import extend_segments, make_detector, refine_segments
 from companion.vision.pipeline import Pipeline
 
 
@@ -152,3 +152,76 @@ def test_a_room_line_ending_on_an_obstacle_edge_does_not_pin_it():
     # Only the obstacle's edge can make a Table-I corner: the T-junction is not its corner.
     among = np.array([True, False])
     assert loose_ends(segs, 10.0, among=among).tolist() == [[True, True], [False, False]]
+
+
+def _tilted_edge(angle_deg, offset_px, noise=2.0, seed=0, scale=8):
+    """A straight step edge through (160 + offset_px, 120) at ``angle_deg`` from the x
+    axis, dark below it, drawn at ``scale``× and area-averaged to 320×240 (pixel centres
+    at whole coordinates), plus sensor noise: the line the refinement should find."""
+    h, w = 240 * scale, 320 * scale
+    ys, xs = np.mgrid[0:h, 0:w]
+    x = (xs + 0.5) / scale - 0.5
+    y = (ys + 0.5) / scale - 0.5
+    t = np.radians(angle_deg)
+    side = -(x - 160.0 - offset_px) * np.sin(t) + (y - 120.0) * np.cos(t)
+    big = np.where(side > 0, 60.0, 180.0).astype(np.float32)
+    frame = cv2.resize(big, (320, 240), interpolation=cv2.INTER_AREA)
+    frame += np.random.default_rng(seed).normal(0.0, noise, frame.shape)
+    return np.clip(frame, 0, 255).astype(np.uint8)
+
+
+def _distance_to_edge(points, angle_deg, offset_px):
+    t = np.radians(angle_deg)
+    return -(points[:, 0] - 160.0 - offset_px) * np.sin(t) + (points[:, 1] - 120.0) * np.cos(t)
+
+
+@pytest.mark.parametrize("angle_deg", [7.0, 38.0, 81.0])
+def test_refinement_moves_a_segment_onto_its_edge(angle_deg):
+    offset = 0.3
+    frame = _tilted_edge(angle_deg, offset)
+    t = np.radians(angle_deg)
+    u = np.array([np.cos(t), np.sin(t)])
+    n = np.array([-np.sin(t), np.cos(t)])
+    centre = np.array([160.0 + offset, 120.0])
+    # A detector's segment, 60 px long, 0.8 px off the edge at one end and 0.2 px at the
+    # other: 1° out.
+    a = centre - 30 * u + 0.8 * n
+    b = centre + 30 * u - 0.2 * n
+    seg = np.array([[*a, *b]])
+    before = np.abs(_distance_to_edge(seg.reshape(2, 2), angle_deg, offset))
+    out = refine_segments(frame, seg)
+    after = np.abs(_distance_to_edge(out.reshape(2, 2), angle_deg, offset))
+    assert before.max() > 0.7
+    assert after.max() < 0.1
+    # The ends keep their places along the line.
+    along = (out.reshape(2, 2) - seg.reshape(2, 2)) @ u
+    assert np.abs(along).max() < 0.05
+
+
+def test_refinement_leaves_short_segments_and_segments_with_no_edge_alone():
+    frame = _tilted_edge(20.0, 0.0)
+    short = np.array([[150.0, 117.0, 160.0, 121.0]])  # 11 px: too few stations
+    assert np.array_equal(refine_segments(frame, short), short)
+    flat = np.array([[20.0, 200.0, 120.0, 200.0]])  # far from the edge, on flat grey
+    assert np.array_equal(refine_segments(frame, flat), flat)
+    # A segment 4 px from the edge: the peak in the window is not its edge's.
+    t = np.radians(20.0)
+    n = np.array([-np.sin(t), np.cos(t)])
+    u = np.array([np.cos(t), np.sin(t)])
+    a, b = np.array([160.0, 120.0]) - 30 * u + 4 * n, np.array([160.0, 120.0]) + 30 * u + 4 * n
+    off = np.array([[*a, *b]])
+    assert np.array_equal(refine_segments(frame, off), off)
+
+
+def test_the_pipeline_refines_its_segments_when_asked():
+    frame = cv2.cvtColor(_tilted_edge(12.0, 0.4), cv2.COLOR_GRAY2BGR)
+    cfg = Config()
+    plain = Pipeline(cfg).segments(frame)
+    refined = Pipeline(replace(cfg, vision=replace(cfg.vision, refine_segments=True))).segments(
+        frame)
+    assert len(plain) == len(refined) >= 1
+    on_edge = np.abs(_distance_to_edge(refined.reshape(-1, 2), 12.0, 0.4))
+    was = np.abs(_distance_to_edge(plain.reshape(-1, 2), 12.0, 0.4))
+    assert on_edge.max() < 0.15
+    assert not np.array_equal(plain, refined)
+    assert on_edge.max() <= was.max()

@@ -30,7 +30,13 @@ from companion.vision.corners import (
 from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lens import half_diagonal, radial_k, undistort_maps
-from companion.vision.lines import extend_segments, filter_segments, make_detector, to_gray
+from companion.vision.lines import (
+    extend_segments,
+    filter_segments,
+    make_detector,
+    refine_segments,
+    to_gray,
+)
 from companion.vision.obstacles import Obstacle, find_obstacles
 from companion.vision.ranging import FloorContact, floor_contacts, path_distance
 from companion.vision.tracking import Track, update_track
@@ -400,15 +406,19 @@ class Pipeline:
         The layout VPs are a vote of hundreds of segments, in which a chance segment is
         one outlier among many and a faint true one still adds support; a corner is built
         from two or three segments, and one chance segment is enough to make a wrong one.
+        With ``vision.refine_segments`` each is moved onto its edge, sub-pixel.
         """
         h, w = gray.shape[:2]
         detect, min_len = self.detector_for(w, h)
         segments, validated = detect(gray)
         cap = self.config.vision.max_segments
         every = filter_segments(segments, min_len, cap)
-        if validated.all():
-            return every, every
-        return every, filter_segments(segments[validated], min_len, cap)
+        chosen = every if validated.all() else filter_segments(segments[validated], min_len, cap)
+        if self.config.vision.refine_segments:
+            refined = refine_segments(gray, every)
+            chosen = refined if chosen is every else refine_segments(gray, chosen)
+            every = refined
+        return every, chosen
 
     def layout(self, frame: np.ndarray) -> tuple[LayoutVPs, str]:
         """Stages 1–2 alone, frame → layout VPs and the focal length's source (given,
