@@ -124,7 +124,8 @@ def grow_segments(gray, segments, ends, double max_px, double step_px, double of
     return out_arr
 
 
-DEF MAX_PROFILE = 64
+cdef enum:
+    MAX_PROFILE = 64  # longest grey profile across a segment
 
 
 def refine_segments(smooth, segments, Py_ssize_t half_px, double step_px,
@@ -156,7 +157,8 @@ def refine_segments(smooth, segments, Py_ssize_t half_px, double step_px,
     cdef Py_ssize_t n = s.shape[0], i, j, k, m, kk, best, stations, used, station, centre
     cdef Py_ssize_t count = 2 * half_px + 3, nd = 2 * half_px + 1
     cdef Py_ssize_t rows = img.shape[0], cols = img.shape[1], major_len, minor_len
-    if n == 0 or count > MAX_PROFILE or half_px < 1 or min_stations < 3 or max_stations < min_stations:
+    if (n == 0 or count > MAX_PROFILE or half_px < 1 or min_stations < 3
+            or max_stations < min_stations):
         return out_arr
     cdef double grey[MAX_PROFILE]
     cdef double p0, q0, p1, q1, slope, lo, hi, span, spacing, minor, tot, sign, a, b, c, den
