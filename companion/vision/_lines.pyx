@@ -143,10 +143,10 @@ def refine_segments(smooth, segments, Py_ssize_t half_px, double step_px,
     interpolation: reading along a pixel column (or row) keeps it cheap. A line
     ``minor = a + b · major`` is fitted to the peaks by least squares, weighted by the
     peak's height, twice: without peaks lower than a quarter of the mean height, then also
-    without peaks farther than ``outlier_px`` (across the line) from the first fit. The ends move onto that line,
-    each to its nearest point. A segment is left as it is when fewer than ``min_share`` of
-    its stations give a peak inside the window, or when an end would move more than
-    ``max_shift_px``.
+    without peaks farther than ``outlier_px`` (across the line) from the first fit. The
+    ends move onto that line, each to its nearest point. A segment is left as it is when
+    fewer than ``min_share`` of its stations give a peak inside the window, or when an end
+    would move more than ``max_shift_px``.
 
     ``smooth``: H×W uint8 (a lightly smoothed grey frame); ``segments`` N×4 pixels.
     N×4 out, same order.
@@ -208,8 +208,8 @@ def refine_segments(smooth, segments, Py_ssize_t half_px, double step_px,
             if centre - half_px - 1 < 0 or centre + half_px + 1 >= minor_len:
                 continue
             for k in range(count):
-                grey[k] = (img[station, centre - half_px - 1 + k] if x_major == 0
-                           else img[centre - half_px - 1 + k, station])
+                grey[k] = (img[centre - half_px - 1 + k, station] if x_major
+                           else img[station, centre - half_px - 1 + k])
             for k in range(nd):
                 der[used, k] = grey[k + 2] - grey[k]
             tot += der[used, half_px]
