@@ -154,6 +154,17 @@ def test_a_room_line_ending_on_an_obstacle_edge_does_not_pin_it():
     assert loose_ends(segs, 10.0, among=among).tolist() == [[True, True], [False, False]]
 
 
+def _across_edge(x, y, angle_deg, offset_px):
+    """Signed distance in pixels of (x, y) from the edge of :func:`_tilted_edge` (positive
+    on its dark side)."""
+    t = np.radians(angle_deg)
+    return -(x - 160.0 - offset_px) * np.sin(t) + (y - 120.0) * np.cos(t)
+
+
+def _distance_to_edge(points, angle_deg, offset_px):
+    return _across_edge(points[:, 0], points[:, 1], angle_deg, offset_px)
+
+
 def _tilted_edge(angle_deg, offset_px, noise=2.0, seed=0, scale=8):
     """A straight step edge through (160 + offset_px, 120) at ``angle_deg`` from the x
     axis, dark below it, drawn at ``scale``× and area-averaged to 320×240 (pixel centres
@@ -162,17 +173,13 @@ def _tilted_edge(angle_deg, offset_px, noise=2.0, seed=0, scale=8):
     ys, xs = np.mgrid[0:h, 0:w]
     x = (xs + 0.5) / scale - 0.5
     y = (ys + 0.5) / scale - 0.5
-    t = np.radians(angle_deg)
-    side = -(x - 160.0 - offset_px) * np.sin(t) + (y - 120.0) * np.cos(t)
-    big = np.where(side > 0, 60.0, 180.0).astype(np.float32)
+    big = np.where(_across_edge(x, y, angle_deg, offset_px) > 0, 60.0, 180.0).astype(
+        np.float32)
     frame = cv2.resize(big, (320, 240), interpolation=cv2.INTER_AREA)
     frame += np.random.default_rng(seed).normal(0.0, noise, frame.shape)
     return np.clip(frame, 0, 255).astype(np.uint8)
 
 
-def _distance_to_edge(points, angle_deg, offset_px):
-    t = np.radians(angle_deg)
-    return -(points[:, 0] - 160.0 - offset_px) * np.sin(t) + (points[:, 1] - 120.0) * np.cos(t)
 
 
 @pytest.mark.parametrize("angle_deg", [7.0, 38.0, 81.0])
