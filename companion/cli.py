@@ -92,6 +92,10 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("--focal-given", action="store_true",
                     help="with --renderer: give the pipeline the rendered focal length (a "
                          "diagnosis; the targets are without it)")
+    ev.add_argument("--mirrored", action="store_true",
+                    help="with --renderer: also run each frame mirrored left to right (η "
+                         "negated) and pool the two, twice the sample at no rendering cost, "
+                         "to tell a rule change on dev from chance")
     ev.add_argument("--clips", action="store_true",
                     help="with --renderer: per-frame and tracked η on yawing clips")
     ev.add_argument("--long", action="store_true",
@@ -244,6 +248,8 @@ def run_eval(args) -> int:
     from sitl.evaluate import format_report
     from sitl.evaluate import run_eval as evaluate
 
+    if args.mirrored and not args.renderer:
+        raise UserError("--mirrored goes with --renderer NAME (the frozen splits)")
     if args.yud:
         args.split = {"dev": "train", None: "test"}.get(args.split, args.split)
         return run_eval_yud(args)
@@ -304,9 +310,9 @@ def run_eval_splits(args) -> int:
     if args.long and not args.clips:
         raise UserError("--long goes with --clips")
     if args.clips:
-        if args.focal_given or args.lens_given:
+        if args.focal_given or args.lens_given or args.mirrored:
             raise UserError("--clips estimates the focal length as a video does; "
-                            "--focal-given and --lens-given are for the splits")
+                            "--focal-given, --lens-given and --mirrored are for the splits")
         return _eval_clips(args, renderers, splits, cfg, start)
     figures = {}
     for renderer in renderers:
@@ -318,10 +324,11 @@ def run_eval_splits(args) -> int:
                 reports[s] = run_split(renderer, s, cfg, args.workers,
                                        lambda d, t, p=progress, r=renderer, s=s: p.update(
                                            d, t, f"{r} {s}"), focal_given=args.focal_given,
-                                       lens_given=args.lens_given)
+                                       lens_given=args.lens_given, mirrored=args.mirrored)
             finally:
                 progress.close()
-        for line in format_splits(renderer, reports, args.focal_given, args.lens_given):
+        for line in format_splits(renderer, reports, args.focal_given, args.lens_given,
+                                  args.mirrored):
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
@@ -329,7 +336,8 @@ def run_eval_splits(args) -> int:
     print(f"({took:.0f} s; companion eval --renderer {args.renderer}"
           + (f" --split {split}" if split != "all" else "")
           + (" --focal-given" if args.focal_given else "")
-          + (" --lens-given" if args.lens_given else "") + ")")
+          + (" --lens-given" if args.lens_given else "")
+          + (" --mirrored" if args.mirrored else "") + ")")
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)

@@ -50,7 +50,7 @@ import numpy as np
 from companion.config import Config
 from companion.vision.lens import distort_px
 from companion.vision.pipeline import Pipeline
-from sitl.scene import ObstacleTruth, SceneTruth, random_scene, render
+from sitl.scene import ObstacleTruth, SceneTruth, mirror, random_scene, render
 
 __all__ = ["SceneResult", "EvalReport", "evaluate_scene", "run_eval", "format_report",
            "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
@@ -100,6 +100,7 @@ class SceneResult:
     latency_ms: float
     range_est_m: float | None = None
     range_true_m: float | None = None  # the true floor corner nearest the measured one
+    mirrored: bool = False  # the frame was mirrored left to right (sitl.scene.mirror)
 
 
 RANGE_BANDS = ((1.0, 3.0), (3.0, 6.0))
@@ -175,9 +176,17 @@ def _cache_dir() -> Path:
 
 
 def draw_scene(renderer: str, seed: int, index: int, obstacle_share: float = 0.7,
-               width: int = 640, height: int = 480, hfov_deg: float | None = None):
-    """Scene ``index`` of ``seed`` drawn by ``renderer``: (image BGR, :class:`SceneTruth`,
-    focal length in pixels). Path-traced frames are cached on disk."""
+               width: int = 640, height: int = 480, hfov_deg: float | None = None,
+               mirrored: bool = False):
+    """Scene ``index`` of ``seed`` drawn by ``renderer``: (image BGR, :class:`SceneTruth`).
+    Path-traced frames are cached on disk. ``mirrored``: the frame and its truth mirrored
+    left to right (:func:`sitl.scene.mirror`)."""
+    image, truth = _draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg)
+    return mirror(image, truth) if mirrored else (image, truth)
+
+
+def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float,
+                width: int, height: int, hfov_deg: float | None):
     rng = np.random.default_rng([seed, index])
     has_obstacle = bool(rng.random() < obstacle_share)
     if renderer == "scene":
@@ -239,9 +248,12 @@ def evaluate_scene(
     renderer: str = "scene",
     hfov_deg: float | None = None,
     assume_lens: bool = False,
+    mirrored: bool = False,
 ) -> SceneResult:
-    """Draw scene ``index`` of ``seed``, run the pipeline, compare with the truth."""
-    image, truth = draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg)
+    """Draw scene ``index`` of ``seed`` (``mirrored`` left to right if asked), run the
+    pipeline, compare with the truth."""
+    image, truth = draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg,
+                              mirrored)
     cfg = config or Config()
     lens = assume_lens and bool(truth.distortion)
     if assume_focal or assume_lens:
@@ -279,6 +291,7 @@ def evaluate_scene(
         latency_ms=est.latency_ms,
         range_est_m=est.range_m,
         range_true_m=range_true,
+        mirrored=mirrored,
     )
 
 
@@ -299,24 +312,28 @@ def run_eval(
     renderer: str = "scene",
     hfov_deg: float | None = None,
     assume_lens: bool = False,
+    mirrored: bool = False,
 ) -> EvalReport:
-    """Evaluate ``scenes`` seeded scenes; ``progress(done, total)`` is called as they finish."""
+    """Evaluate ``scenes`` seeded scenes; ``progress(done, total)`` is called as they finish.
+    With ``mirrored``, each scene is also evaluated mirrored left to right, and the report
+    pools both: twice the results, for telling a rule change from chance on dev."""
     jobs = [(seed, i, config, obstacle_share, width, height, assume_focal, renderer, hfov_deg,
-             assume_lens)
-            for i in range(scenes)]
+             assume_lens, flip)
+            for i in range(scenes) for flip in ((False, True) if mirrored else (False,))]
+    total = len(jobs)
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
     results: list[SceneResult] = []
     if workers <= 1:
         for job in jobs:
             results.append(_worker(job))
             if progress:
-                progress(len(results), scenes)
+                progress(len(results), total)
     else:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             for r in pool.map(_worker, jobs, chunksize=1 if renderer == "pathtraced" else 4):
                 results.append(r)
                 if progress:
-                    progress(len(results), scenes)
+                    progress(len(results), total)
     return EvalReport(scenes=scenes, seed=seed, results=results)
 
 
@@ -359,22 +376,24 @@ def format_report(report: EvalReport) -> list[str]:
 
 def run_split(renderer: str, split: str, config: Config | None = None,
               workers: int | None = None, progress=None, focal_given: bool = False,
-              lens_given: bool = False) -> dict[str, EvalReport]:
+              lens_given: bool = False, mirrored: bool = False) -> dict[str, EvalReport]:
     """One frozen split of one renderer at every camera of :data:`CAMERAS`, focal length
     not given (unless ``focal_given``, or ``lens_given``: the focal length and the lens
-    distortion, diagnoses): {camera label: report}.
-    ``progress(done, total)`` counts scenes."""
+    distortion, diagnoses): {camera label: report}. ``mirrored``: each frame also run
+    mirrored, pooled (:func:`run_eval`).
+    ``progress(done, total)`` counts frames."""
     seed, scenes = SPLITS[(renderer, split)]
-    total = scenes * len(CAMERAS)
+    per_camera = scenes * (2 if mirrored else 1)
+    total = per_camera * len(CAMERAS)
     out: dict[str, EvalReport] = {}
     for k, (label, w, h, fov) in enumerate(CAMERAS):
         def step(done, _n, k=k):
             if progress:
-                progress(k * scenes + done, total)
+                progress(k * per_camera + done, total)
         out[label] = run_eval(scenes, seed, config, width=w, height=h,
                               assume_focal=focal_given,
                               workers=workers, progress=step, renderer=renderer, hfov_deg=fov,
-                              assume_lens=lens_given)
+                              assume_lens=lens_given, mirrored=mirrored)
     return out
 
 
@@ -384,7 +403,8 @@ def _split_target(label: str) -> dict[str, float]:
 
 
 def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
-                  focal_given: bool = False, lens_given: bool = False) -> list[str]:
+                  focal_given: bool = False, lens_given: bool = False,
+                  mirrored: bool = False) -> list[str]:
     """One table for a renderer: a row per camera and split, issue 18's targets beside."""
 
     def pct(x):
@@ -396,6 +416,8 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
     given = "given (a diagnosis: the targets are without it)" if focal_given else "not given"
     if lens_given:
         given = "and lens distortion given (a diagnosis: the targets are without them)"
+    if mirrored:
+        given += "; each frame also mirrored left to right, the two pooled"
     lines = [f"renderer {renderer}: focal length {given}",
              f"{'camera':<14} {'split':<5} {'seed':>5} {'det %':>6} {'η med°':>7} {'η p90°':>7} "
              f"{'FP %':>5} {'sign✗':>7} {'corner %':>8}   targets det/med/p90"]

@@ -7,8 +7,9 @@ import pytest
 
 from companion.config import Config
 from companion.vision.pipeline import STAGES, Pipeline
+from sitl.evaluate import evaluate_scene
 from sitl.sample import sample_scene
-from sitl.scene import Box, Camera, Scene, render, yaw_sweep
+from sitl.scene import Box, Camera, Scene, mirror, render, yaw_sweep
 
 
 def _pipeline(focal):
@@ -124,6 +125,47 @@ def test_renderer_truth_eta_follows_eq10():
     truth = render(scene, cam)[1]
     assert truth.obstacles[0].eta_deg == pytest.approx(20.0, abs=1e-6)
     assert truth.focal_px == pytest.approx(320.0)
+
+
+def _same_up_to_sign(a, b):
+    a, b = np.asarray(a), np.asarray(b)
+    return min(np.abs(a - b).max(), np.abs(a + b).max()) < 1e-9
+
+
+def test_a_mirrored_frame_has_the_truth_of_the_room_reflected():
+    # Reflecting the world across the camera's vertical plane (y → −y, yaws and roll
+    # negated; the default room is symmetric) mirrors the frame left to right. The truth
+    # rendered from that reflected world is what mirror() must give.
+    cam = Camera(hfov_deg=80.0, x=0.0, y=0.3, yaw_deg=0.0, pitch_deg=3.0, roll_deg=2.0)
+    box = Box(4.0, 0.8, 25.0, 1.2, 0.7, 0.9)
+    image, truth = render(Scene(boxes=(box,)), cam)
+    cam_r = replace(cam, y=-cam.y, roll_deg=-cam.roll_deg)
+    box_r = replace(box, y=-box.y, yaw_deg=-box.yaw_deg)
+    truth_r = render(Scene(boxes=(box_r,)), cam_r)[1]
+    flipped, mirrored = mirror(image, truth)
+
+    assert flipped.shape == image.shape and np.array_equal(flipped[:, ::-1], image)
+    o, o_r = mirrored.obstacles[0], truth_r.obstacles[0]
+    assert o.eta_deg == pytest.approx(o_r.eta_deg, abs=1e-9) and o.eta_deg < 0
+    assert o.phi_deg == pytest.approx(o_r.phi_deg, abs=1e-9)
+    assert o.rel_yaw_deg == pytest.approx(o_r.rel_yaw_deg, abs=1e-9)
+    assert o.m_px == pytest.approx(o_r.m_px, abs=1e-6)
+    assert (o.detectable, o.non_manhattan) == (o_r.detectable, o_r.non_manhattan)
+    for points, points_r in ((o.corners_px, o_r.corners_px), (o.floor_corners, o_r.floor_corners)):
+        assert len(points) == len(points_r) >= 3
+        assert np.allclose(sorted(points), sorted(points_r), atol=1e-6)
+    for v, v_r in zip(o.ovps + mirrored.layout_vps, o_r.ovps + truth_r.layout_vps, strict=True):
+        assert _same_up_to_sign(v, v_r)
+
+
+def test_evaluating_a_mirrored_frame_scores_it_against_the_mirrored_truth():
+    # Room 6 of seed 0 holds a box about 21° off: found both ways, η of opposite signs.
+    plain = evaluate_scene(0, 6)
+    flipped = evaluate_scene(0, 6, mirrored=True)
+    assert flipped.mirrored and not plain.mirrored and plain.detectable and flipped.detectable
+    assert flipped.eta_true_deg == pytest.approx(-plain.eta_true_deg) and plain.eta_true_deg < -10
+    for r in (plain, flipped):
+        assert r.eta_est_deg == pytest.approx(r.eta_true_deg, abs=1.0)
 
 
 def test_a_lower_edge_threshold_finds_a_faint_edge():
