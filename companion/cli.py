@@ -93,9 +93,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="with --renderer: give the pipeline the rendered focal length (a "
                          "diagnosis; the targets are without it)")
     ev.add_argument("--mirrored", action="store_true",
-                    help="with --renderer: also run each frame mirrored left to right (η "
-                         "negated) and pool the two, twice the sample at no rendering cost, "
-                         "to tell a rule change on dev from chance")
+                    help="with --renderer (and --clips): also run each frame (clip) mirrored "
+                         "left to right (η negated) and pool the two, twice the sample at no "
+                         "rendering cost, to tell a rule change on dev from chance")
     ev.add_argument("--clips", action="store_true",
                     help="with --renderer: per-frame and tracked η on yawing clips")
     ev.add_argument("--long", action="store_true",
@@ -310,9 +310,9 @@ def run_eval_splits(args) -> int:
     if args.long and not args.clips:
         raise UserError("--long goes with --clips")
     if args.clips:
-        if args.focal_given or args.lens_given or args.mirrored:
+        if args.focal_given or args.lens_given:
             raise UserError("--clips estimates the focal length as a video does; "
-                            "--focal-given, --lens-given and --mirrored are for the splits")
+                            "--focal-given and --lens-given are for the splits")
         return _eval_clips(args, renderers, splits, cfg, start)
     figures = {}
     for renderer in renderers:
@@ -356,10 +356,10 @@ def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
                 by_split[s] = run_clips(s, cfg, args.workers,
                                         lambda d, t, p=progress, r=renderer, s=s: p.update(
                                             d, t, f"{r} clips {s}"), renderer=renderer,
-                                        long=args.long)
+                                        long=args.long, mirrored=args.mirrored)
             finally:
                 progress.close()
-        for line in format_clips(by_split, renderer, args.long):
+        for line in format_clips(by_split, renderer, args.long, args.mirrored):
             print(line)
         figures[renderer] = {s: {"per_frame": clip_figures(fr, False),
                                  "tracked": clip_figures(fr, True)}
@@ -371,6 +371,7 @@ def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
                                             late_tracked=clip_figures(late, True))
     print(f"({time.perf_counter() - start:.0f} s; companion eval --renderer {args.renderer}"
           " --clips" + (" --long" if args.long else "")
+          + (" --mirrored" if args.mirrored else "")
           + (f" --split {splits[0]})" if len(splits) == 1 else ")"))
     if args.json:
         with _open_output(args.json, "figures") as f:

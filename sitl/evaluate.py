@@ -494,15 +494,18 @@ class FrameResult:
     eta_true_deg: float | None
     eta_deg: float | None
     eta_tracked_deg: float | None
+    mirrored: bool = False  # the clip was mirrored left to right (sitl.scene.mirror)
 
 
 def evaluate_clip(seed: int, clip: int, config: Config | None = None,
                   obstacle_share: float = 0.7, frames: int = CLIP_FRAMES,
-                  renderer: str = "scene") -> list[FrameResult]:
+                  renderer: str = "scene", mirrored: bool = False) -> list[FrameResult]:
     """A clip: a random room seen while the vehicle yaws at a steady 1–4° per frame either
     way and drifts forward; one pipeline runs over its frames, focal length not given, as
     on a video. ``scene`` clips have a 90° lens; ``pathtraced`` ones the renderer's own
-    50–110°, with the motion blur of the clip's yaw rate at :data:`CLIP_FPS`."""
+    50–110°, with the motion blur of the clip's yaw rate at :data:`CLIP_FPS`. ``mirrored``:
+    every frame mirrored left to right, the clip of the reflected room yawing the other
+    way (:func:`sitl.scene.mirror`)."""
     from sitl.scene import yaw_sweep
 
     rng = np.random.default_rng([seed, clip])
@@ -525,6 +528,8 @@ def evaluate_clip(seed: int, clip: int, config: Config | None = None,
             look = replace(r3.look, seed=r3.look.seed + k, yaw_rate_deg_s=rate * CLIP_FPS)
             image, truth = _render_cached(f"clips/{seed}-{clip}-{k}.png",
                                           replace(r3, look=look), c)
+        if mirrored:
+            image, truth = mirror(image, truth)
         est = pipe(image)
         targets = [o for o in truth.obstacles if o.non_manhattan]
         detectable = [o for o in targets if o.detectable]
@@ -533,7 +538,7 @@ def evaluate_clip(seed: int, clip: int, config: Config | None = None,
             target = _match(est.obstacles[0].corners_px, truth)[0] or target
         out.append(FrameResult(clip, k, bool(targets), bool(detectable),
                                None if target is None else target.eta_deg,
-                               est.eta_deg, est.eta_tracked_deg))
+                               est.eta_deg, est.eta_tracked_deg, mirrored))
     return out
 
 
@@ -542,20 +547,21 @@ def _clip_worker(args):
 
 
 def run_clips(split: str, config: Config | None = None, workers: int | None = None,
-              progress=None, renderer: str = "scene", long: bool = False
-              ) -> list[FrameResult]:
+              progress=None, renderer: str = "scene", long: bool = False,
+              mirrored: bool = False) -> list[FrameResult]:
     """Every clip of a renderer's frozen tracking split (:data:`CLIPS`, or with ``long``
-    :data:`LONG_CLIPS`)."""
+    :data:`LONG_CLIPS`); with ``mirrored`` each clip also mirrored, the two pooled."""
     seed, clips = (LONG_CLIPS if long else CLIPS)[(renderer, split)]
     length = LONG_CLIP_FRAMES if long else CLIP_FRAMES
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
     out: list[FrameResult] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = [(seed, i, config, 0.7, length, renderer) for i in range(clips)]
+        jobs = [(seed, i, config, 0.7, length, renderer, flip) for i in range(clips)
+                for flip in ((False, True) if mirrored else (False,))]
         for k, frames in enumerate(pool.map(_clip_worker, jobs)):
             out.extend(frames)
             if progress:
-                progress(k + 1, clips)
+                progress(k + 1, len(jobs))
     return out
 
 
@@ -592,13 +598,14 @@ def clip_figures(frames: list[FrameResult], tracked: bool) -> dict[str, float | 
 
 
 def format_clips(by_split: dict[str, list[FrameResult]], renderer: str = "scene",
-                 long: bool = False) -> list[str]:
+                 long: bool = False, mirrored: bool = False) -> list[str]:
     lens = "90° lens" if renderer == "scene" else "50–110° lenses"
     n = LONG_CLIP_FRAMES if long else CLIP_FRAMES
     lines = [f"tracking, renderer {renderer}, {lens}, focal length not given: "
              f"{n}-frame yawing clips; η error modulo 90° (to the nearest face), "
              "sign✗ where 1° <= |η_truth| <= 40°"
-             + (f"; 'late': frames {LATE_FRAME}–{n - 1}, the lens learnt" if long else ""),
+             + (f"; 'late': frames {LATE_FRAME}–{n - 1}, the lens learnt" if long else "")
+             + ("; each clip also mirrored left to right, the two pooled" if mirrored else ""),
              f"{'split':<5} {'η':<15} {'det %':>6} {'η med°':>7} {'η p90°':>7} {'FP %':>5} "
              f"{'sign✗':>8}"]
     rows = [("per frame", False, False), ("tracked", True, False)]
