@@ -93,9 +93,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="with --renderer: give the pipeline the rendered focal length (a "
                          "diagnosis; the targets are without it)")
     ev.add_argument("--mirrored", action="store_true",
-                    help="with --renderer (and --clips): also run each frame (clip) mirrored "
-                         "left to right (η negated) and pool the two, twice the sample at no "
-                         "rendering cost, to tell a rule change on dev from chance")
+                    help="with --renderer (and --clips) or --yud: also run each frame, clip or "
+                         "photograph mirrored left to right and pool the two, twice the "
+                         "sample, to tell a rule change on dev or train from chance")
     ev.add_argument("--clips", action="store_true",
                     help="with --renderer: per-frame and tracked η on yawing clips")
     ev.add_argument("--long", action="store_true",
@@ -248,8 +248,8 @@ def run_eval(args) -> int:
     from sitl.evaluate import format_report
     from sitl.evaluate import run_eval as evaluate
 
-    if args.mirrored and not args.renderer:
-        raise UserError("--mirrored goes with --renderer NAME (the frozen splits)")
+    if args.mirrored and (args.variants or not (args.renderer or args.yud)):
+        raise UserError("--mirrored goes with --renderer NAME or --yud DIR (not --variants)")
     if args.yud:
         args.split = {"dev": "train", None: "test"}.get(args.split, args.split)
         return run_eval_yud(args)
@@ -410,8 +410,10 @@ def run_eval_yud(args) -> int:
     if args.variants:
         return _eval_yud_variants(args, cfg, start)
     reports, peer_missing = [], None
+    if args.mirrored:
+        peer_missing = "--mirrored is for companion's own decisions"
     for given in (True, False):
-        reports.append(evaluate_yud(folder, args.split, given, cfg))
+        reports.append(evaluate_yud(folder, args.split, given, cfg, mirrored=args.mirrored))
         if args.no_peer or peer_missing:
             continue
         try:
@@ -419,7 +421,9 @@ def run_eval_yud(args) -> int:
         except PeerUnavailable as exc:
             peer_missing = str(exc)
     print(f"York Urban DB, {args.split} split: layout VPs (V1, V2, V3) against the "
-          "hand-labelled Manhattan VPs")
+          "hand-labelled Manhattan VPs"
+          + ("; each photograph also mirrored left to right, the two pooled" if args.mirrored
+             else ""))
     for line in format_yud(reports):
         print(line)
     ours = next(r for r in reports if r.focal_given and r.method == "companion")
@@ -434,7 +438,7 @@ def run_eval_yud(args) -> int:
     if peer_missing:
         print(f"peer not run: {peer_missing}")
     print(f"({time.perf_counter() - start:.0f} s; companion eval --yud {args.yud} "
-          f"--split {args.split})")
+          f"--split {args.split}" + (" --mirrored" if args.mirrored else "") + ")")
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump([r.figures() for r in reports], f, indent=2)

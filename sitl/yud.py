@@ -105,6 +105,24 @@ class _Yud:
         """3-D directions of homogeneous pixel VPs through the true intrinsics."""
         return [self.k_inv @ v for v in vps]
 
+    def view(self, im: dict, mirrored: bool):
+        """One photograph as the metric needs it: (image, true VP directions K×3, true
+        segments N×4, inverse intrinsics). ``mirrored``: the photograph mirrored left to
+        right, its truth with it (x → W − 1 − x; directions' x and the principal point's
+        mirrored)."""
+        image = self.read(im)
+        truth = np.asarray(im["vps_dir"], dtype=float)
+        segments = np.asarray(im["segments"], dtype=float).reshape(-1, 4)
+        if not mirrored:
+            return image, truth, segments, self.k_inv
+        w = image.shape[1]
+        k = np.linalg.inv(self.k_inv)
+        k[0, 2] = w - 1 - k[0, 2]
+        segments = segments.copy()
+        segments[:, [0, 2]] = w - 1 - segments[:, [0, 2]]
+        return (np.ascontiguousarray(image[:, ::-1]), truth * np.array([-1.0, 1.0, 1.0]),
+                segments, np.linalg.inv(k))
+
 
 TIMING_RUNS = 3
 
@@ -134,24 +152,29 @@ def _load(folder: str | Path, split: str, limit: int | None) -> _Yud:
 
 
 def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = True,
-                 config: Config | None = None, limit: int | None = None) -> YudReport:
+                 config: Config | None = None, limit: int | None = None,
+                 mirrored: bool = False) -> YudReport:
     """Run the layout-VP stage on every image of ``split`` ("train", "test" or "all"),
-    or on its first ``limit`` images."""
+    or on its first ``limit`` images. ``mirrored``: then on each photograph mirrored left
+    to right too (a second pipeline, as a second camera), the two pooled: twice the
+    sample for a decision on the train split."""
     yud = _load(folder, split, limit)
     cfg = config or Config()
     cfg = replace(cfg, camera=replace(cfg.camera, focal_px=yud.f_true if focal_given else None))
-    pipeline = Pipeline(cfg)
+    pipelines = {False: Pipeline(cfg), True: Pipeline(cfg)}
     errors, ms, pipeline_ms, focals = [], [], [], []
     right = assigned = total = 0
-    for im in yud.images:
-        image = yud.read(im)
+    views = [(im, flip) for flip in ((False, True) if mirrored else (False,))
+             for im in yud.images]
+    for im, flip in views:
+        image, truth, segs, k_inv = yud.view(im, flip)
+        pipeline = pipelines[flip]
         # Timed like the peer: image in, layout VPs out (lines and VPs, no corners).
         (layout, focal_source), t = _best_of(pipeline.layout, image)
         ms.append(t)
         pipeline_ms.append(_best_of(pipeline, image)[1])
         rows = layout.usable_rows
-        dirs = yud.directions(layout.vps[list(rows)])
-        truth = np.asarray(im["vps_dir"], dtype=float)
+        dirs = [k_inv @ v for v in layout.vps[list(rows)]]
         errors.extend(angular_errors_deg(truth, dirs))
         if focal_source == "estimated":
             focals.append(layout.focal_px)
@@ -159,7 +182,6 @@ def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = Tr
         truth = truth / np.linalg.norm(truth, axis=1, keepdims=True)
         truth_of_est = {i: int(np.argmax(np.abs(truth @ (d / np.linalg.norm(d)))))
                         for i, d in zip(rows, dirs, strict=True)}
-        segs = np.asarray(im["segments"], dtype=float).reshape(-1, 4)
         labels, _ = assign_segments(segs, layout.vps, cfg.vision.vanishing)
         gt = np.asarray(im["segment_vp"], dtype=int)
         for lab, g in zip(labels, gt, strict=True):
@@ -168,7 +190,7 @@ def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = Tr
                 assigned += 1
                 right += truth_of_est[lab] == g
     return YudReport(
-        split=split, images=len(yud.images), focal_given=focal_given,
+        split=split, images=len(views), focal_given=focal_given,
         errors_deg=np.asarray(errors), ms_per_image=float(np.median(ms)) if ms else 0.0,
         focal_estimates_px=np.asarray(focals), true_focal_px=yud.f_true,
         assign_precision=right / assigned if assigned else 0.0,

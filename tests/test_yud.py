@@ -2,12 +2,14 @@
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
 from sitl.yud import (
     VARIANTS,
     YudReport,
+    _Yud,
     angular_errors_deg,
     area_under_curve,
     evaluate_yud,
@@ -84,6 +86,35 @@ def test_views_of_three_train_images_keep_their_manhattan_frame():
     for name, e in errors.items():
         assert len(e) == 9, name
         assert np.median(e) < 3.0, name
+
+
+def test_a_mirrored_photograph_keeps_its_truth_in_place(tmp_path):
+    # A VP of the truth, projected through the mirrored intrinsics, lands where the
+    # mirrored image shows it: at x → W − 1 − x, y unchanged; so do the labelled segments.
+    w, h, f, pp = 64, 48, 50.0, np.array([30.0, 20.0])
+    image = np.random.default_rng(0).integers(0, 255, (h, w, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / "a.png"), image)
+    k = np.array([[f, 0, pp[0]], [0, f, pp[1]], [0, 0, 1.0]])
+    dirs = np.array([[0.6, 0.1, 0.79], [-0.3, 0.05, 0.95], [0.02, 1.0, 0.03]])
+    im = {"file": "a.png", "vps_dir": dirs.tolist(), "segments": [[1, 2, 40, 9]]}
+    yud = _Yud(tmp_path, f, np.linalg.inv(k), [im])
+    plain, truth, segs, k_inv = yud.view(im, False)
+    flipped, truth_m, segs_m, k_inv_m = yud.view(im, True)
+    assert np.array_equal(flipped, plain[:, ::-1])
+    for d, d_m in zip(truth, truth_m, strict=True):
+        p, p_m = k @ d, np.linalg.inv(k_inv_m) @ d_m
+        assert p_m[0] / p_m[2] == pytest.approx(w - 1 - p[0] / p[2])
+        assert p_m[1] / p_m[2] == pytest.approx(p[1] / p[2])
+    assert segs_m.tolist() == [[w - 1 - 1, 2, w - 1 - 40, 9]]
+    assert np.array_equal(k_inv, yud.k_inv) and np.array_equal(segs, [[1, 2, 40, 9]])
+
+
+@pytest.mark.skipif(not (YUD / "yud.json").is_file(),
+                    reason="the York Urban DB lives outside the repository (../shared/data)")
+def test_three_train_images_and_their_mirror_images_find_their_manhattan_frame():
+    report = evaluate_yud(YUD, "train", focal_given=True, limit=3, mirrored=True)
+    assert report.images == 6 and len(report.errors_deg) == 18
+    assert np.median(report.errors_deg[9:]) < 2.0  # the mirrored photographs'
 
 
 @pytest.mark.skipif(not (YUD / "yud.json").is_file(),
