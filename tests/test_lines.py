@@ -180,8 +180,6 @@ def _tilted_edge(angle_deg, offset_px, noise=2.0, seed=0, scale=8):
     return np.clip(frame, 0, 255).astype(np.uint8)
 
 
-
-
 @pytest.mark.parametrize("angle_deg", [7.0, 38.0, 81.0])
 def test_refinement_moves_a_segment_onto_its_edge(angle_deg):
     offset = 0.3
