@@ -619,6 +619,76 @@ def test_the_stripes_of_a_rug_are_no_face():
                           labels) == []
 
 
+
+def _table_from_the_front(yaw_deg=25.0, legs_at=(0.2, 1.2)):
+    """A table 3 m ahead, its top 0.45 m below a level camera, ``yaw_deg`` off the view,
+    seen nearly from the front: the top's front edge (1.4 m) and legs hanging from it at
+    ``legs_at`` metres along it down to the floor (1.2 m below the camera). The top's
+    receding edges are too foreshortened to show. Returns the segments (edge first), the
+    front edge's direction on the floor and the receding one's."""
+    a = np.radians(yaw_deg)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    left = np.array([-0.7, 0.45, 3.0])
+    drop = np.array([0.0, 0.75, 0.0])
+    segs = [[*_project([left])[0], *_project([left + 1.4 * u])[0]]]
+    for t in legs_at:
+        segs.append([*_project([left + t * u])[0], *_project([left + t * u + drop])[0]])
+    return np.array(segs), u, v
+
+
+def test_a_table_seen_from_the_front_hangs_its_legs_from_its_top_edge():
+    from companion.vision.obstacles import find_obstacles
+
+    segs, u, v = _table_from_the_front()
+    labels = np.array([NONE, V3, V3])
+
+    def found(segs, labels, layout=None):
+        return find_obstacles(segs, find_corners(segs, labels), layout or _room_layout(),
+                              labels == NONE, labels)
+
+    obstacles = found(segs, labels)
+    assert len(obstacles) == 1
+    dirs = direction_of(obstacles[0].ovps[:2], F, C)
+    for face in (u, v):  # the top edge's OVP, and the other at a right angle on the horizon
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+    # The legs are what make it a table: the top edge alone is nothing.
+    assert found(segs[:1], labels[:1]) == []
+    # The other OVP is taken through the focal length: the room must vouch for it.
+    assert found(segs, labels, _room_layout(v2_skew_deg=-5.0)) == []
+
+
+def test_legs_under_one_end_of_an_edge_make_no_table():
+    # Both vertical edges under the left half of the edge: one leg seen twice, or an edge
+    # that only touches something standing near one of its ends.
+    from companion.vision.obstacles import find_obstacles
+
+    segs, _, _ = _table_from_the_front(legs_at=(0.2, 0.6))
+    labels = np.array([NONE, V3, V3])
+    assert find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                          labels) == []
+
+
+def test_a_face_whose_bottom_edge_is_a_room_edge_is_no_table():
+    # A face whose top edge is found 8° off the room while a room edge (along V1, the
+    # image's rows here) joins the feet of its vertical edges: its bottom edge is the
+    # room's direction, so the face is an aligned box's (a nearly frontal edge fixes its
+    # own direction poorly).
+    from companion.vision.obstacles import find_obstacles
+
+    segs, _, _ = _table_from_the_front(yaw_deg=8.0)
+    labels = np.array([NONE, V3, V3])
+    feet = segs[1:, 2:]
+    assert np.ptp(feet[:, 1]) < 10.0  # a row passes both feet within the corner radius
+    row = feet[:, 1].mean()
+    bottom = [[feet[:, 0].min() - 20.0, row, feet[:, 0].max() + 20.0, row]]
+
+    def found(segs, labels):
+        return find_obstacles(segs, find_corners(segs, labels), _room_layout(),
+                              labels == NONE, labels)
+
+    assert len(found(segs, labels)) == 1
+    assert found(np.vstack([segs, bottom]), np.append(labels, V1)) == []
+
 def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
     from companion.vision.corners import table1_labels
 

@@ -391,15 +391,14 @@ cdef inline bint leaves_end(double[:, ::1] s, double[::1] lengths, Py_ssize_t f,
     return fabs(side[0]) >= MIN_SIDE
 
 
-cdef list edge_legs(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
-                    Py_ssize_t[::1] verticals, Py_ssize_t[::1] free_idx, Params* p):
+cdef list edge_legs(double[:, ::1] s, double[::1] lengths, list chains,
+                    Py_ssize_t[::1] free_idx, Params* p):
     """Vertical edges with the non-Manhattan legs that end at each of their two ends.
 
-    Returns a list of (chain, legs_a, legs_b) with ``chain`` as :func:`vertical_chains`
-    gives it; a leg is (segment index, side): the side (±1) of the edge it leaves toward.
-    Legs are at least 20° off the edge (:func:`leaves_end`)."""
+    Returns a list of (chain, legs_a, legs_b) with ``chain`` one of ``chains``
+    (:func:`vertical_chains`); a leg is (segment index, side): the side (±1) of the edge it
+    leaves toward. Legs are at least 20° off the edge (:func:`leaves_end`)."""
     out = []
-    chains = vertical_chains(s, lengths, lines, verticals, p)
     if free_idx.shape[0] == 0 or not chains:
         return out
     cdef double ex, ey, axx, axy, side
@@ -1002,6 +1001,102 @@ cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines
     return ovps, np.array(points, dtype=float).reshape(-1, 2), len(members), height, lam3
 
 
+cdef bint room_edge_under(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1] room_idx,
+                          list feet, double radius) noexcept:
+    """Whether one room edge (``room_idx``: V1, V2) passes within ``radius`` of two of the
+    ``feet`` (x, y), the lower ends of the edges hanging from a face's top edge: then the
+    face's bottom edge points at a layout VP and the face is Manhattan (an aligned box
+    whose top edge was found a few degrees off; a nearly frontal edge fixes its own
+    direction poorly)."""
+    cdef Py_ssize_t j, k
+    cdef double ux, uy, t, dx, dy
+    cdef int near
+    for j in range(room_idx.shape[0]):
+        k = room_idx[j]
+        if lengths[k] <= 0:
+            continue
+        ux, uy = (s[k, 2] - s[k, 0]) / lengths[k], (s[k, 3] - s[k, 1]) / lengths[k]
+        near = 0
+        for x, y in feet:
+            t = (x - s[k, 0]) * ux + (y - s[k, 1]) * uy
+            t = 0.0 if t < 0 else (lengths[k] if t > lengths[k] else t)
+            dx, dy = x - s[k, 0] - t * ux, y - s[k, 1] - t * uy
+            near += dx * dx + dy * dy <= radius * radius
+        if near >= 2:
+            return True
+    return False
+
+
+cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
+                        double[::1] lengths, Py_ssize_t[::1] free_idx, list chains,
+                        Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
+    """One face's top edge with vertical edges hanging from it: a table's top seen from
+    the front with its legs under the top's front edge, or a box whose receding edges are
+    too foreshortened to show. The top edge is horizontal, so its OVP is where it crosses
+    the horizon; the other face's OVP is at a right angle to it through the focal length,
+    as in :func:`single_halves`, whose test of V1 ⟂ V2 applies.
+
+    The top edge is a free leg ``5 min_edge_px`` long or more (shorter ones fix their
+    direction too poorly), below the horizon (a top seen from above), its OVP away from V1
+    and V2. A vertical edge hangs from it when its upper end is within ``radius_px`` of
+    its line and between its ends; two or more must, one on each side of its middle (the
+    legs of one top, not one edge twice). No room edge may join two of their feet
+    (:func:`room_edge_under`)."""
+    cdef double o[3]
+    cdef double d1[3]
+    cdef double d2[3]
+    cdef double ux, uy, length, t, off, ha, hb, below, lo, hi, tallest
+    cdef Py_ssize_t i, a, k
+    cdef Hypothesis* h
+    if not chains or abs(90.0 - angle_between_deg(fr.l1, fr.l2)) > p.single_face_tol_deg:
+        return
+    # Distances from the horizon are signed positive below it (image y grows downward).
+    below = 1.0 if fr.horizon[1] > 0 else -1.0
+    for i in range(free_idx.shape[0]):
+        a = free_idx[i]
+        length = lengths[a]
+        if length < 5 * p.min_edge_px:
+            continue
+        if below * (fr.horizon[0] * (s[a, 0] + s[a, 2]) + fr.horizon[1] * (s[a, 1] + s[a, 3])
+                    + 2 * fr.horizon[2]) <= 0:
+            continue
+        if not intersect(&lines[a, 0], fr.horizon, o):
+            continue
+        direction_of(fr, o, d1)
+        if not off_layout(fr, p, d1):
+            continue
+        ux, uy = (s[a, 2] - s[a, 0]) / length, (s[a, 3] - s[a, 1]) / length
+        lo, hi, tallest = INF, -INF, 0.0
+        feet = []
+        for chain in chains:
+            ha = below * (fr.horizon[0] * chain[0] + fr.horizon[1] * chain[1] + fr.horizon[2])
+            hb = below * (fr.horizon[0] * chain[2] + fr.horizon[1] * chain[3] + fr.horizon[2])
+            k = 0 if ha < hb else 2  # the upper end
+            off = fabs(lines[a, 0] * chain[k] + lines[a, 1] * chain[k + 1] + lines[a, 2])
+            t = (chain[k] - s[a, 0]) * ux + (chain[k + 1] - s[a, 1]) * uy
+            if off > p.radius_px or t < -p.radius_px or t > length + p.radius_px:
+                continue
+            feet.append((chain[2 - k], chain[3 - k]))
+            if t < lo:
+                lo, top_lo = t, (chain[k], chain[k + 1])
+            if t > hi:
+                hi, top_hi = t, (chain[k], chain[k + 1])
+            tallest = max(tallest, chain[4])
+        if len(feet) < 2 or lo > length / 2 or hi < length / 2:
+            continue
+        if room_edge_under(s, lengths, room_idx, feet, p.radius_px):
+            continue
+        cross3(fr.d3, d1, d2)
+        if unit3(d2) <= 0:
+            continue
+        h = new_hypothesis(found)
+        set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
+        h.legs[0] = a
+        h.nlegs = 1
+        h.points[0], h.points[1] = top_lo
+        h.points[2], h.points[3] = top_hi
+        h.npoints = 2
+
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
          double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
          double radius_px, double leg_gap_frac, double min_leg_sin, bint room_seen):
@@ -1107,7 +1202,8 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         junctions = leg_junctions(s, lines, lengths, free_idx, min_leg_sin, &p)
         junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
-        edges = edge_legs(s, lengths, lines, verticals, free_idx, &p)
+        chains = vertical_chains(s, lengths, lines, verticals, &p)
+        edges = edge_legs(s, lengths, chains, free_idx, &p)
         silhouette_halves(&fr, &p, lines, edges, &halves)
         pair_halves(&fr, &p, &halves, &found)
         if found.count == 0:
@@ -1116,6 +1212,8 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
             junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx, &found)
         if found.count == 0 and room_seen:
             single_halves(&fr, &p, &halves, &found)
+        if found.count == 0 and room_seen:
+            hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
         if found.count == 0:
             return []
         obstacles = []
