@@ -1097,6 +1097,7 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
         h.points[2], h.points[3] = top_hi
         h.npoints = 2
 
+
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
          double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
          double radius_px, double leg_gap_frac, double min_leg_sin, bint room_seen):

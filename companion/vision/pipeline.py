@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -106,7 +107,7 @@ class RunningFocal:
 
     estimates_px: tuple[float, ...] = ()
 
-    @property
+    @cached_property  # read several times a frame; the value never changes
     def focal_px(self) -> float | None:
         """The running estimate in pixels, None before the first frame gave one."""
         return float(np.median(self.estimates_px)) if self.estimates_px else None
@@ -137,7 +138,7 @@ class RunningLens:
     def settled(self) -> bool:
         return len(self.estimates_k) >= LENS_FRAMES
 
-    @property
+    @cached_property  # read every frame of the video; the value never changes
     def k(self) -> float | None:
         """The lens's coefficient once settled (0.0 for a pinhole), else None."""
         if not self.settled:
