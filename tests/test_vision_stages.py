@@ -619,7 +619,6 @@ def test_the_stripes_of_a_rug_are_no_face():
                           labels) == []
 
 
-
 def _table_from_the_front(yaw_deg=25.0, legs_at=(0.2, 1.2)):
     """A table 3 m ahead, its top 0.45 m below a level camera, ``yaw_deg`` off the view,
     seen nearly from the front: the top's front edge (1.4 m) and legs hanging from it at
@@ -688,6 +687,7 @@ def test_a_face_whose_bottom_edge_is_a_room_edge_is_no_table():
 
     assert len(found(segs, labels)) == 1
     assert found(np.vstack([segs, bottom]), np.append(labels, V1)) == []
+
 
 def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
     from companion.vision.corners import table1_labels

@@ -101,9 +101,9 @@ def find_obstacles(
     unless a room edge leaves the vertical edge's far end inside the frame (a door frame or
     an aligned box, with a rug's or a shadow's corner at its foot).
     When no pair is found this way, boxes that show fewer corners are looked for: leg
-    junctions one above the other, vertical edges with a leg at each end, (with
+    junctions one above the other; vertical edges with a leg at each end; (with
     ``hidden_edge_corners``) two legs meeting where no vertical edge shows, one of them
-    running on to a vertical edge at its far end, a box showing one face, and last a
+    running on to a vertical edge at its far end; a box showing one face; and last a
     face's top edge with vertical edges hanging from it (a table seen from the front, its
     legs under the top).
 
