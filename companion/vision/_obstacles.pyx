@@ -111,6 +111,13 @@ cdef inline bint at_border(Frame* fr, double x, double y, double margin) noexcep
     return x <= margin or y <= margin or x >= 2 * fr.cx - margin or y >= 2 * fr.cy - margin
 
 
+cdef inline double below_horizon(Frame* fr, double x, double y) noexcept nogil:
+    """Signed distance in pixels of (x, y) from the horizon, positive below it (image y
+    grows downward)."""
+    cdef double d = fr.horizon[0] * x + fr.horizon[1] * y + fr.horizon[2]
+    return d if fr.horizon[1] > 0 else -d
+
+
 cdef inline double horizon_error(Frame* fr, const double* d) noexcept nogil:
     """How far a direction is from horizontal (⟂ V3), degrees."""
     return fabs(90.0 - angle_between_deg(d, fr.d3))
@@ -1045,20 +1052,17 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
     cdef double o[3]
     cdef double d1[3]
     cdef double d2[3]
-    cdef double ux, uy, length, t, off, ha, hb, below, lo, hi, tallest
+    cdef double ux, uy, length, t, off, lo, hi, tallest
     cdef Py_ssize_t i, a, k
     cdef Hypothesis* h
     if not chains or abs(90.0 - angle_between_deg(fr.l1, fr.l2)) > p.single_face_tol_deg:
         return
-    # Distances from the horizon are signed positive below it (image y grows downward).
-    below = 1.0 if fr.horizon[1] > 0 else -1.0
     for i in range(free_idx.shape[0]):
         a = free_idx[i]
         length = lengths[a]
         if length < 5 * p.min_edge_px:
             continue
-        if below * (fr.horizon[0] * (s[a, 0] + s[a, 2]) + fr.horizon[1] * (s[a, 1] + s[a, 3])
-                    + 2 * fr.horizon[2]) <= 0:
+        if below_horizon(fr, (s[a, 0] + s[a, 2]) / 2, (s[a, 1] + s[a, 3]) / 2) <= 0:
             continue
         if not intersect(&lines[a, 0], fr.horizon, o):
             continue
@@ -1069,9 +1073,8 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
         lo, hi, tallest = INF, -INF, 0.0
         feet = []
         for chain in chains:
-            ha = below * (fr.horizon[0] * chain[0] + fr.horizon[1] * chain[1] + fr.horizon[2])
-            hb = below * (fr.horizon[0] * chain[2] + fr.horizon[1] * chain[3] + fr.horizon[2])
-            k = 0 if ha < hb else 2  # the upper end
+            k = 0 if below_horizon(fr, chain[0], chain[1]) < below_horizon(
+                fr, chain[2], chain[3]) else 2  # the upper end
             off = fabs(lines[a, 0] * chain[k] + lines[a, 1] * chain[k + 1] + lines[a, 2])
             t = (chain[k] - s[a, 0]) * ux + (chain[k + 1] - s[a, 1]) * uy
             if off > p.radius_px or t < -p.radius_px or t > length + p.radius_px:
