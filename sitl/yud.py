@@ -101,9 +101,11 @@ class _Yud:
             raise FileNotFoundError(f"cannot read {self.root / im['file']}")
         return image
 
-    def directions(self, vps) -> list[np.ndarray]:
-        """3-D directions of homogeneous pixel VPs through the true intrinsics."""
-        return [self.k_inv @ v for v in vps]
+    def directions(self, vps, k_inv: np.ndarray | None = None) -> list[np.ndarray]:
+        """3-D directions of homogeneous pixel VPs through the true intrinsics, or through
+        ``k_inv`` (a mirrored :meth:`view`'s)."""
+        k_inv = self.k_inv if k_inv is None else k_inv
+        return [k_inv @ v for v in vps]
 
     def view(self, im: dict, mirrored: bool):
         """One photograph as the metric needs it: (image, true VP directions K×3, true
@@ -174,7 +176,7 @@ def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = Tr
         ms.append(t)
         pipeline_ms.append(_best_of(pipeline, image)[1])
         rows = layout.usable_rows
-        dirs = [k_inv @ v for v in layout.vps[list(rows)]]
+        dirs = yud.directions(layout.vps[list(rows)], k_inv)
         errors.extend(angular_errors_deg(truth, dirs))
         if focal_source == "estimated":
             focals.append(layout.focal_px)
