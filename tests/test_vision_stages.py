@@ -359,6 +359,36 @@ def test_obstacle_from_two_leg_corners_of_its_outline():
                           ~np.isin(labels_m, (V1, V2, V3)), labels_m) == []
 
 
+def test_a_leg_at_each_end_takes_the_edges_other_legs_into_its_fit():
+    # The near vertical edge of a box 35° off the room, taller than the camera, with no
+    # Table-I corner: a short top edge of face u at the top (its far end 1 px off), the
+    # bottom edges of faces v and u at the foot. The OVPs come from the top u leg and the
+    # bottom v leg crossing the horizon; the bottom u leg, longer and exact, must go into
+    # the fit with them.
+    from companion.vision.obstacles import find_obstacles
+
+    a = np.radians(35.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    foot = np.array([0.2, 1.2, 4.0])  # on the floor, 1.2 m below the camera
+    top = foot + [0.0, -2.4, 0.0]
+    b, t, t_u, b_u, b_v = _project([foot, top, top + 0.3 * u, foot + 0.8 * u, foot + 0.8 * v])
+    n = np.array([t_u[1] - t[1], t[0] - t_u[0]]) / np.hypot(*(t_u - t))
+    top_u = [*t, *(t_u + n)]
+
+    def u_error(segs):
+        labels = np.array([V3] + [NONE] * (len(segs) - 1))
+        no_corners = find_corners(segs, labels).take(np.zeros(0, int))
+        found = find_obstacles(segs, no_corners, _room_layout(), labels == NONE, labels)
+        assert len(found) == 1
+        dirs = direction_of(found[0].ovps[:2], F, C)
+        return angle_between_directions_deg(dirs, u[None, :]).min()
+
+    alone = u_error(np.array([[*b, *t], top_u, [*b, *b_v]]))
+    with_bottom_u = u_error(np.array([[*b, *t], top_u, [*b, *b_v], [*b, *b_u]]))
+    assert alone > 1.0  # one short leg's horizon crossing: a pixel turns it by degrees
+    assert with_bottom_u < 0.7 * alone  # without it the fit is the same as alone
+
+
 def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
     # The top corner of a box 35° off the room, its vertical edge down to the floor, and no
     # legs at the bottom: both OVPs are where the top legs cross the horizon, which for a

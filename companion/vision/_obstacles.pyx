@@ -542,7 +542,9 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list ed
     above its top, its faces too alike for the edge between them to show): each leg's OVP
     is where it crosses the horizon, as for a single corner. One leg must be at each end:
     two legs at one end may be a rug's corner touching a door frame. Per edge, its most
-    orthogonal pair (the first on ties)."""
+    orthogonal pair (the first on ties). The edge's other legs, up to four in all, go with
+    it: one short leg's horizon crossing moves by degrees for a pixel of noise, and the
+    box fit (:func:`obstacle`) rests each OVP on every leg that points at it."""
     cdef double d1[3]
     cdef double d2[3]
     cdef double b1[3]
@@ -571,6 +573,10 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list ed
         set_ovps(h, b1, b2, best, chain[4])
         h.legs[0], h.legs[1] = best_a, best_b
         h.nlegs = 2
+        for k, _ in legs_a + legs_b:
+            if h.nlegs < 4 and k != best_a and k != best_b:
+                h.legs[h.nlegs] = k
+                h.nlegs += 1
         h.points[0], h.points[1], h.points[2], h.points[3] = chain[:4]
         h.npoints = 2
 
