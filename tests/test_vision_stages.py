@@ -360,11 +360,11 @@ def test_obstacle_from_two_leg_corners_of_its_outline():
 
 
 def test_a_leg_at_each_end_takes_the_edges_other_legs_into_its_fit():
-    # The near vertical edge of a box 35° off the room, taller than the camera, with no
-    # Table-I corner: a short top edge of face u at the top (its far end 1 px off), the
-    # bottom edges of faces v and u at the foot. The OVPs come from the top u leg and the
-    # bottom v leg crossing the horizon; the bottom u leg, longer and exact, must go into
-    # the fit with them.
+    # The near vertical edge of a box 35° off the room, taller than the camera: a short
+    # top edge of face u at the top (its far end 1 px off), the bottom edges of faces v
+    # and u at the foot. No Table-I corner is handed over, so the pair rule does not run.
+    # The OVPs come from the top u leg and the bottom v leg crossing the horizon; the
+    # bottom u leg, longer and exact, must go into the fit with them.
     from companion.vision.obstacles import find_obstacles
 
     a = np.radians(35.0)
