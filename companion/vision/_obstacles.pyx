@@ -137,6 +137,13 @@ cdef inline bint off_layout(Frame* fr, Params* p, const double* d) noexcept nogi
             and angle_between_deg(d, fr.l2) >= p.non_manhattan_min_deg)
 
 
+cdef inline bint room_vouches_for_focal(Frame* fr, Params* p) noexcept nogil:
+    """Whether the room's V1 and V2 are at a right angle within ``single_face_tol_deg``
+    under the focal length: a face's other OVP taken at a right angle through it is then
+    trusted (a wrong focal length shows there)."""
+    return fabs(90.0 - angle_between_deg(fr.l1, fr.l2)) <= p.single_face_tol_deg
+
+
 cdef inline bint box_ovps(Frame* fr, Params* p, const double* d1, const double* d2,
                           double* lam3) noexcept nogil:
     """Eq. 8 for the two OVP directions of one box: both within ``horizon_tol_deg`` of
@@ -503,7 +510,7 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
     cdef double d2[3]
     cdef Hypothesis* a
     cdef Hypothesis* h
-    if abs(90.0 - angle_between_deg(fr.l1, fr.l2)) > p.single_face_tol_deg:
+    if not room_vouches_for_focal(fr, p):
         return
     for i in range(halves.count):
         a = &halves.items[i]
@@ -1061,7 +1068,7 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
     cdef double ux, uy, length, t, off, lo, hi, tallest
     cdef Py_ssize_t i, a, k
     cdef Hypothesis* h
-    if not chains or abs(90.0 - angle_between_deg(fr.l1, fr.l2)) > p.single_face_tol_deg:
+    if not chains or not room_vouches_for_focal(fr, p):
         return
     for i in range(free_idx.shape[0]):
         a = free_idx[i]
