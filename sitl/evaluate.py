@@ -50,7 +50,7 @@ import numpy as np
 from companion.config import Config
 from companion.vision.lens import distort_px
 from companion.vision.pipeline import Pipeline
-from sitl.scene import ObstacleTruth, SceneTruth, mirror, random_scene, render
+from sitl.scene import ObstacleTruth, SceneTruth, mirror, orientations, random_scene, render
 
 __all__ = ["SceneResult", "EvalReport", "evaluate_scene", "run_eval", "format_report",
            "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
@@ -319,7 +319,7 @@ def run_eval(
     pools both: twice the results, for telling a rule change from chance on dev."""
     jobs = [(seed, i, config, obstacle_share, width, height, assume_focal, renderer, hfov_deg,
              assume_lens, flip)
-            for i in range(scenes) for flip in ((False, True) if mirrored else (False,))]
+            for i in range(scenes) for flip in orientations(mirrored)]
     total = len(jobs)
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
     results: list[SceneResult] = []
@@ -557,7 +557,7 @@ def run_clips(split: str, config: Config | None = None, workers: int | None = No
     out: list[FrameResult] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
         jobs = [(seed, i, config, 0.7, length, renderer, flip) for i in range(clips)
-                for flip in ((False, True) if mirrored else (False,))]
+                for flip in orientations(mirrored)]
         for k, frames in enumerate(pool.map(_clip_worker, jobs)):
             out.extend(frames)
             if progress:

@@ -39,6 +39,7 @@ __all__ = [
     "SceneTruth",
     "render",
     "mirror",
+    "orientations",
     "random_colour",
     "random_decorations",
     "random_scene",
@@ -533,6 +534,12 @@ def _mirror_vp(vp: list[float], width: int) -> list[float]:
     x, y, w = vp
     v = np.array([(width - 1) * w - x, y, w])
     return (v / np.linalg.norm(v)).tolist()
+
+
+def orientations(mirrored: bool) -> tuple[bool, ...]:
+    """The views of a frame an evaluation runs, each ``True`` when mirrored left to right
+    (:func:`mirror`): as taken, and mirrored as well when ``mirrored`` is asked for."""
+    return (False, True) if mirrored else (False,)
 
 
 def mirror(image: np.ndarray, truth: SceneTruth) -> tuple[np.ndarray, SceneTruth]:

@@ -22,6 +22,7 @@ from companion.config import Config
 from companion.vision.geometry import principal_point
 from companion.vision.pipeline import Pipeline
 from companion.vision.vanishing import NONE, assign_segments
+from sitl.scene import orientations
 
 __all__ = ["VARIANTS", "YudReport", "angular_errors_deg", "area_under_curve", "evaluate_yud",
            "evaluate_yud_lu", "evaluate_yud_variants", "format_yud", "format_variants",
@@ -166,7 +167,7 @@ def evaluate_yud(folder: str | Path, split: str = "test", focal_given: bool = Tr
     pipelines = {False: Pipeline(cfg), True: Pipeline(cfg)}
     errors, ms, pipeline_ms, focals = [], [], [], []
     right = assigned = total = 0
-    views = [(im, flip) for flip in ((False, True) if mirrored else (False,))
+    views = [(im, flip) for flip in orientations(mirrored)
              for im in yud.images]
     for im, flip in views:
         image, truth, segs, k_inv = yud.view(im, flip)
