@@ -33,13 +33,19 @@ Policies: ``paper`` (the pipeline on the rendered frame, the default), ``none`` 
 straight: how hard the scenario is), ``oracle`` (the same turn rule fed the renderer's true
 η while the obstacle is in view: the policy's own ceiling).
 
+Renderers: ``scene`` (:mod:`sitl.scene`, flat-shaded, the default) or ``pathtraced`` (the
+same room path-traced by :mod:`sitl.pathtraced`, :func:`pathtraced_room`: soft shadows,
+textured floors and walls, glossy reflections, exposure error, vignetting, sensor noise
+drawn afresh every frame, the blur of the vehicle's own yaw rate, and a radial lens the
+pipeline is not told of). The geometry, and so the collisions and the oracle, are the same.
+
 Time. Against the mock autopilot (the default) the vehicle moves in lock-step with the
 camera: each frame, the mock flies one camera period of simulated time and the companion
-runs on that clock, so a frame that takes 0.12 s to draw costs no flight time, as with a
-real camera. Against another autopilot (``--autopilot URL``, e.g. PX4 SITL) everything runs
-in real time and the harness assumes nothing of it: it maps the autopilot's local frame
-(origin, heading) onto the room where the vehicle hovers when the run begins, and renders
-at the altitude the vehicle actually reports.
+runs on that clock, so a frame that takes 0.12 s to draw (1.5 s path-traced) costs no
+flight time, as with a real camera. Against another autopilot (``--autopilot URL``, e.g.
+PX4 SITL) everything runs in real time and the harness assumes nothing of it: it maps the
+autopilot's local frame (origin, heading) onto the room where the vehicle hovers when the
+run begins, and renders at the altitude the vehicle actually reports.
 """
 
 from __future__ import annotations
@@ -76,6 +82,7 @@ __all__ = ["Approach", "RunResult", "draw_approach", "fly_approach", "first_cont
            "format_report", "run_approaches", "summarize", "write_trajectories"]
 
 POLICIES = ("paper", "none", "oracle")
+RENDERERS = ("scene", "pathtraced")
 BODY_RADIUS_M = 0.25
 PASS_MARGIN_M = 1.0
 ROOM_LENGTH_M = (14.0, 18.0)
@@ -188,6 +195,40 @@ def draw_approach(seed: int, run: int) -> Approach:
         blur_sigma=u(0.4, 0.9), scene_seed=int(rng.integers(0, 2**31 - 1)))
 
 
+def pathtraced_room(ap: Approach, spp: int = 8):
+    """The run's room as :mod:`sitl.pathtraced` draws it (a :class:`~sitl.pathtraced.Room3D`):
+    the same geometry, so that collisions and the truth stay the run's (each piece of
+    furniture's bounding box is the run's box; the obstacle and the side furniture are plain
+    boxes or cabinets on a plinth, which fill their boxes), and a look drawn from the run's
+    seed: floor, walls, lamps and daylight, exposure, lens distortion, vignetting and
+    noise (:func:`~sitl.pathtraced.random_look`). The furniture's heights are the flown
+    ones: call it on :meth:`Approach.at_altitude`'s scene."""
+    from sitl import pathtraced
+
+    rng = np.random.default_rng([ap.scene_seed, 3])
+    pieces = []
+    for box in ap.boxes:
+        kind = str(rng.choice(["box", "cabinet"]))
+        material = "wood" if kind == "cabinet" and rng.random() < 0.5 else str(
+            rng.choice(["paint", "wood", "gloss"]))
+        pieces.append(pathtraced.Furniture(kind, box.x, box.y, box.yaw_deg, box.length,
+                                           box.width, box.height, box.albedo, material))
+    return pathtraced.Room3D(ap.room, tuple(pieces), pathtraced.random_look(rng, spp))
+
+
+def _draw_frame(renderer: str, scene: Scene, r3, cam: Camera, frame: int,
+                yaw_rate_deg_s: float) -> np.ndarray:
+    """The camera's picture of the run's room: :mod:`sitl.scene`'s, or path-traced
+    (``r3``: :func:`pathtraced_room`) with this frame's noise and the blur of the vehicle's
+    own yaw rate."""
+    if renderer == "scene":
+        return render_image(scene, cam, supersample=1)
+    from sitl import pathtraced
+
+    look = replace(r3.look, frame=frame + 1, yaw_rate_deg_s=yaw_rate_deg_s)
+    return pathtraced.render(replace(r3, look=look), cam)[0]
+
+
 # --------------------------------------------------------------------------- geometry
 
 
@@ -276,17 +317,20 @@ def _policy_config(base: Config, ap: Approach, camera: Camera, focal_given: bool
 def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None,
                  autopilot_url: str | None = None, camera_hz: float = 5.0, width: int = 640,
                  height: int = 480, base: Config | None = None, focal_given: bool = True,
-                 lens_k1: float = 0.0) -> RunResult:
+                 lens_k1: float = 0.0, renderer: str = "scene", spp: int = 8) -> RunResult:
     """Fly one drawn approach; against the lock-step mock on 127.0.0.1:``port``, or, with
     ``autopilot_url``, against an autopilot that is already running (real time). With
     ``lens_k1`` every frame is taken through that radial lens (OpenCV's k1, focal length
-    normalised)."""
+    normalised). ``renderer``: ``scene`` (:mod:`sitl.scene`) or ``pathtraced`` (the same
+    room path-traced at ``spp`` samples per pixel, :func:`pathtraced_room`; its own lens)."""
     from companion.control.offboard import OffboardController
     from companion.vision.pipeline import Pipeline
     from sitl.closed_loop import fly_alongside
 
     if policy not in POLICIES:
         raise ValueError(f"--policy {policy}: must be one of {', '.join(POLICIES)}")
+    if renderer not in RENDERERS:
+        raise ValueError(f"--renderer {renderer}: must be one of {', '.join(RENDERERS)}")
     cam0 = Camera(width=width, height=height, hfov_deg=ap.hfov_deg)
     lens = distort_maps(width, height, cam0.focal_px, (lens_k1,)) if lens_k1 else None
     mock = None
@@ -357,6 +401,8 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
         alt = -pose.down_m
         flown = ap.at_altitude(alt)
         scene = flown.scene()
+        r3 = pathtraced_room(flown, spp) if renderer == "pathtraced" else None
+        last_heading = None
         frame_map = FrameMap(pose.north_m, pose.east_m, pose.yaw_deg, ap.start_x_m,
                              ap.start_y_m, ap.course_deg)
         u, _ = ap.course_axes()
@@ -396,7 +442,10 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                 return
             cam = replace(cam0, x=x, y=y, height_m=alt, yaw_deg=heading,
                           pitch_deg=pose.pitch_deg, roll_deg=pose.roll_deg)
-            image = render_image(scene, cam, supersample=1) if policy == "paper" else None
+            yaw_rate = 0.0 if last_heading is None else wrap_deg(heading - last_heading) * camera_hz
+            last_heading = heading
+            image = (_draw_frame(renderer, scene, r3, cam, result.frames, yaw_rate)
+                     if policy == "paper" else None)
             if image is not None and lens is not None:
                 image = cv2.remap(image, *lens, cv2.INTER_LINEAR,
                                   borderMode=cv2.BORDER_REPLICATE)
@@ -544,8 +593,8 @@ def _pct(values: Sequence[float], q: float) -> float | None:
     return round(float(np.percentile(values, q)), 2) if len(values) else None
 
 
-def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: int
-              ) -> dict:
+def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: int,
+              renderer: str = "scene") -> dict:
     """The figures of a set of runs (the ``--json`` document)."""
     rs = [r for _, r in results]
     n = len(rs)
@@ -566,7 +615,8 @@ def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: 
             "speed_m_s": round(ap.speed_m_s, 2), "hfov_deg": round(ap.hfov_deg, 1),
             "detail": r.detail, "path": r.path, "decisions": r.decisions})
     return {
-        "scenario": "approach", "policy": policy, "seed": seed, "runs": n,
+        "scenario": "approach", "policy": policy, "renderer": renderer, "seed": seed,
+        "runs": n,
         "passed": count["passed"], "collisions": count["collision"],
         "timeouts": count["timeout"], "errors": count["error"],
         "collision_free_rate": round((n - count["collision"] - count["error"]) / n, 4)
@@ -593,7 +643,8 @@ def format_report(summary: dict) -> list[str]:
                    f" {r['min_clearance_m']:>6.2f} {r['max_turn_deg']:>6.1f}")
     s = summary
     n = s["runs"]
-    out.append(f"policy {s['policy']}, {n} runs (seed {s['seed']}): passed {s['passed']}, "
+    drawn = "" if s.get("renderer", "scene") == "scene" else f", {s['renderer']} rooms"
+    out.append(f"policy {s['policy']}{drawn}, {n} runs (seed {s['seed']}): passed {s['passed']}, "
                f"collisions {s['collisions']}, timeouts {s['timeouts']}, errors {s['errors']}; "
                f"collision-free {100 * s['collision_free_rate']:.1f} %, "
                f"passed {100 * s['pass_rate']:.1f} %")
@@ -679,6 +730,17 @@ def simulate_approach(args, progress=None) -> int:
         raise ValueError("--speed must be between 0.05 and 5 m/s")
     if not -0.2 <= args.lens <= 0.1:
         raise ValueError("--lens must be between -0.2 and 0.1 (OpenCV's k1)")
+    if args.renderer == "pathtraced":
+        from sitl import pathtraced
+
+        if args.lens:
+            raise ValueError("--lens goes with --renderer scene: a path-traced run draws "
+                             "its own lens")
+        if not 1 <= args.spp <= 1024:
+            raise ValueError("--spp must be between 1 and 1024")
+        if not pathtraced.available():
+            raise ValueError("--renderer pathtraced needs Mitsuba 3: "
+                             "pip install 'companion[render]'")
     base = load_config(args.sim_config)
     started = time.perf_counter()
 
@@ -694,16 +756,19 @@ def simulate_approach(args, progress=None) -> int:
             args.runs, args.seed, args.policy, workers=max(1, args.workers), progress=report,
             autopilot_url=args.autopilot, camera_hz=args.camera_hz, width=args.width,
             height=args.height, base=base, focal_given=not args.no_focal,
-            speed_m_s=args.speed, lens_k1=args.lens)
+            speed_m_s=args.speed, lens_k1=args.lens, renderer=args.renderer, spp=args.spp)
     except AutopilotNotFound as exc:
         raise ValueError(str(exc)) from None
     if progress is not None:
         progress(args.runs, args.runs, "")
-    summary = summarize(results, args.policy, args.seed)
+    summary = summarize(results, args.policy, args.seed, args.renderer)
     for line in format_report(summary):
         print(line)
     options = "" if args.speed is None else f" --speed {args.speed:g}"
     options += f" --lens {args.lens:g}" if args.lens else ""
+    if args.renderer != "scene":
+        options += f" --renderer {args.renderer} --spp {args.spp}"
+    options += " --no-focal" if args.no_focal else ""
     print(f"({time.perf_counter() - started:.0f} s; companion sim --scenario approach "
           f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{options})")
     for r in summary["per_run"]:

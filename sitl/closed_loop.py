@@ -339,6 +339,13 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="approach: the camera's radial distortion, OpenCV's k1 on "
                          "coordinates normalised by the focal length (< 0 barrel; default "
                          "0, a pinhole): every frame is taken through it")
+    ap.add_argument("--renderer", choices=("scene", "pathtraced"), default="scene",
+                    help="approach: who draws the camera's view: scene (flat-shaded, fast, "
+                         "default) or pathtraced (the same room path-traced by Mitsuba 3: "
+                         "shadows, textures, noise, yaw blur and a lens of its own; about "
+                         "1.5 s a frame; needs companion[render])")
+    ap.add_argument("--spp", type=int, default=8,
+                    help="approach, pathtraced: samples per pixel (default 8)")
     ap.add_argument("--json", metavar="PATH", help="approach: write the figures as JSON")
     ap.add_argument("--config", metavar="PATH", dest="sim_config",
                     help="approach: YAML config for the companion (policy, offboard ...)")
@@ -350,6 +357,8 @@ def simulate(args: argparse.Namespace) -> int:
         from sitl.approach import simulate_approach
 
         return simulate_approach(args)
+    if args.renderer != "scene":
+        raise ValueError("--renderer pathtraced goes with --scenario approach")
     runs = []
     for eta0 in args.eta0:
         if not -89.0 < eta0 < 89.0:

@@ -54,8 +54,8 @@ from sitl.scene import (
     scene_truth,
 )
 
-__all__ = ["Furniture", "Look", "Room3D", "random_room", "render", "truth", "available", "KINDS",
-           "VERSION"]
+__all__ = ["Furniture", "Look", "Room3D", "random_room", "random_look", "render", "truth",
+           "available", "KINDS", "VERSION"]
 
 VERSION = 2
 """bumped whenever a change alters the pictures: cached renders of another version are not reused"""
@@ -159,7 +159,8 @@ class Look:
     shot_noise: float = 1.0  # variance per grey level
     read_noise: float = 2.0  # grey levels
     spp: int = 16
-    seed: int = 0
+    seed: int = 0  # textures, and the noise of a still
+    frame: int = 0  # frame k of a video: its noise is drawn afresh, its textures stay
 
 
 @dataclass(frozen=True)
@@ -359,7 +360,8 @@ def _scene_dict(mi, r3: Room3D, cam: Camera, folder: str) -> dict:
         "type": "perspective", "fov": cam.hfov_deg, "fov_axis": "x",
         "near_clip": 0.05, "far_clip": 100.0,
         "to_world": _transform(mi, cols, cam.position),
-        "sampler": {"type": "independent", "sample_count": look.spp, "seed": look.seed},
+        "sampler": {"type": "independent", "sample_count": look.spp,
+                    "seed": look.seed + look.frame},
         "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height,
                  "rfilter": {"type": "gaussian"}, "pixel_format": "rgb"},
     }
@@ -447,6 +449,14 @@ def _scene_dict(mi, r3: Room3D, cam: Camera, folder: str) -> dict:
                 bsdf = _bsdf(mi, rgb=_rgb(f.colour) * shade,
                              gloss=0.15 if f.material == "gloss" else 0.0)
             d[f"f{k}p{j}"] = _cube(mi, centre, a1, a2, half, bsdf)
+    if room.rug is not None:  # striped, as sitl.scene draws it: lines on the floor at its yaw
+        rug = room.rug
+        a = math.radians(rug.yaw_deg)
+        a1, a2 = np.array([math.cos(a), math.sin(a), 0.0]), np.array([-math.sin(a), math.cos(a), 0])
+        tex = _carpet(rng, rug.albedo)
+        tex[:, tex.shape[1] // 2:] *= 0.45  # 0.7 of the albedo, as displayed
+        d["rug"] = _rect(mi, [rug.x, rug.y, -0.004], a1, -a2, rug.length / 2, rug.width / 2,
+                         _bsdf(mi, tex, uv_scale=(rug.length / (2 * rug.stripe_m), 1.0)))
     return d
 
 
@@ -498,7 +508,7 @@ def develop(linear_rgb: np.ndarray, cam: Camera, look: Look) -> np.ndarray:
     """What the camera makes of the scene's radiance: yaw blur, lens distortion,
     vignetting, auto-exposure with an error of ``exposure_ev`` stops, clipped highlights,
     sRGB, shot and read noise, 8 bits. Returns H×W×3 uint8 BGR."""
-    rng = np.random.default_rng([look.seed, 7])
+    rng = np.random.default_rng([look.seed, 7, look.frame] if look.frame else [look.seed, 7])
     img = np.nan_to_num(linear_rgb.astype(np.float32), nan=0.0, posinf=0.0)
     # The path tracer's own grain, smoothed as a camera's noise reduction would; edges stay.
     scale = max(float(np.percentile(img, 99)), 1e-6)
@@ -555,7 +565,7 @@ def render(r3: Room3D, cam: Camera) -> tuple[np.ndarray, SceneTruth]:
     mi = _mi()
     with tempfile.TemporaryDirectory(prefix="companion-") as folder:
         scene = mi.load_dict(_scene_dict(mi, r3, cam, folder))
-    linear = np.array(mi.render(scene, spp=r3.look.spp, seed=r3.look.seed))
+    linear = np.array(mi.render(scene, spp=r3.look.spp, seed=r3.look.seed + r3.look.frame))
     return develop(linear[..., :3], cam, r3.look), truth(r3, cam)
 
 
@@ -646,7 +656,13 @@ def random_room(rng: np.random.Generator, width: int = 640, height: int = 480,
     decorations = tuple(r for r in random_decorations(rng, room0, clutter=True)
                         if isinstance(r, WallRect))
     room = replace(room0, decorations=decorations)
-    look = Look(
+    return Room3D(room, tuple(pieces), random_look(rng, spp)), cam
+
+
+def random_look(rng: np.random.Generator, spp: int = 16) -> Look:
+    """A random :class:`Look` (all randomness from ``rng``): floor, walls, light, exposure,
+    yaw blur, lens, vignetting and noise, in the ranges real indoor footage shows."""
+    return Look(
         floor=str(rng.choice(["planks", "carpet", "tiles"])),
         floor_gloss=float(rng.choice([0.0, 0.0, rng.uniform(0.05, 0.25)])),
         wall=str(rng.choice(["paint", "paint", "stripes", "pattern"])),
@@ -664,4 +680,3 @@ def random_room(rng: np.random.Generator, width: int = 640, height: int = 480,
         spp=spp,
         seed=int(rng.integers(0, 2**31 - 1)),
     )
-    return Room3D(room, tuple(pieces), look), cam

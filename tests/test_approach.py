@@ -114,6 +114,37 @@ def test_the_pipeline_flies_past_and_the_figures_are_written(tmp_path):
     assert measured and all(x > 0.5 for x in measured)  # nearer is below the view
 
 
+def test_the_path_traced_room_is_the_runs_room():
+    from sitl import pathtraced
+    from sitl.approach import pathtraced_room
+    from sitl.scene import Camera, scene_truth
+
+    ap = draw_approach(7, 3).at_altitude(1.1)
+    r3 = pathtraced_room(ap)
+    assert r3 == pathtraced_room(ap)  # drawn from the run's seed: reproducible
+    # Collisions are judged on the run's boxes: the furniture drawn must fill exactly those.
+    drawn = [(b.x, b.y, b.yaw_deg, b.length, b.width, b.height) for b in r3.truth_scene().boxes]
+    assert drawn == [(b.x, b.y, b.yaw_deg, b.length, b.width, b.height) for b in ap.boxes]
+    assert {f.kind for f in r3.furniture} <= {"box", "cabinet"}
+    # The oracle's η (from the flat renderer's truth) is the η the path-traced picture shows.
+    cam = Camera(320, 240, ap.hfov_deg, x=ap.start_x_m, y=ap.start_y_m, height_m=1.1,
+                 yaw_deg=ap.course_deg)
+    assert (pathtraced.truth(r3, cam).obstacles[0].eta_deg
+            == pytest.approx(scene_truth(ap.scene(), cam).obstacles[0].eta_deg))
+    assert r3.look != pathtraced_room(draw_approach(7, 4).at_altitude(1.1)).look
+
+
+def test_the_pipeline_flies_a_path_traced_room():
+    # Shadows, textures, noise, the vehicle's own yaw blur and a lens the pipeline learns
+    # on the way: the same run, drawn by the other renderer (small and grainy, for time).
+    r = fly_approach(draw_approach(0, 1), "paper", port=free_udp_port(), width=320,
+                     height=240, renderer="pathtraced", spp=4)
+    assert r.outcome in ("passed", "collision", "timeout"), r.detail
+    assert r.frames > 20
+    seen = [d for d in r.decisions if d[2] is not None]
+    assert len(seen) >= 5 and r.max_turn_deg > 8.0  # it saw the obstacle and turned
+
+
 def test_summary_counts_outcomes():
     from sitl.approach import RunResult
 

@@ -18,6 +18,7 @@ from sitl.pathtraced import (
     render,
 )
 from sitl.sample import sample_scene
+from sitl.scene import Rug
 
 
 def _room(kind="box", **look):
@@ -56,6 +57,37 @@ def test_a_room_renders_to_the_same_picture_every_time():
     first, _ = render(r3, cam)
     again, _ = render(r3, cam)
     assert np.array_equal(first, again)
+
+
+def test_a_videos_frames_draw_new_noise_on_the_same_textures():
+    # Frame k of a video (Look.frame) must not redraw the wood grain or the wallpaper: a
+    # floor that changes from frame to frame is no room a camera flies through.
+    r3, cam = _room(floor="planks", wall="stripes", shot_noise=0.0, read_noise=0.0)
+    r3 = replace(r3, look=replace(r3.look, spp=32))
+
+    def frame(look):
+        return render(replace(r3, look=look), cam)[0].astype(float)
+
+    one, two = frame(replace(r3.look, frame=1)), frame(replace(r3.look, frame=2))
+    other_room = frame(replace(r3.look, seed=r3.look.seed + 1, frame=1))
+    assert not np.array_equal(one, two)  # the path tracer's grain is drawn afresh
+    noise = np.abs(cv2.GaussianBlur(one - two, (0, 0), 3)).mean()  # 0.8 grey levels
+    textures = np.abs(cv2.GaussianBlur(one - other_room, (0, 0), 3)).mean()  # 2.2
+    assert noise < 0.5 * textures, (noise, textures)
+
+
+def test_a_rug_lies_on_the_floor_with_its_stripes():
+    r3, cam = _room(window_power=0.0, distortion_k1=0.0)
+    room = replace(r3.room, rug=Rug(3.0, -0.6, 25.0, 1.6, 1.0, (0.2, 0.5, 0.3)))
+    plain, _ = render(r3, cam)
+    rugged, truth = render(replace(r3, room=room), cam)
+    # The rug changes the light everywhere a little (one bounce), and the grain with it.
+    changed = cv2.GaussianBlur(np.abs(rugged.astype(float) - plain).max(axis=2), (0, 0),
+                               1.5) > 20
+    rows = np.nonzero(changed.any(axis=1))[0]
+    assert changed.sum() > 200
+    assert rows.min() > cam.height / 2  # below the horizon: on the floor, nothing stands up
+    assert truth.obstacles == render(r3, cam)[1].obstacles  # the truth does not see it
 
 
 def test_lens_distortion_moves_corners_with_the_pixels():
