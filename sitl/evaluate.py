@@ -497,6 +497,12 @@ class FrameResult:
     mirrored: bool = False  # the clip was mirrored left to right (sitl.scene.mirror)
 
 
+CLIP_CACHE = "clips-2"
+"""The cache folder of path-traced clip frames. 2: a clip's textures stay from frame to
+frame (the older frames, in ``clips``, drew the floor, walls and furniture afresh each
+frame)."""
+
+
 def evaluate_clip(seed: int, clip: int, config: Config | None = None,
                   obstacle_share: float = 0.7, frames: int = CLIP_FRAMES,
                   renderer: str = "scene", mirrored: bool = False) -> list[FrameResult]:
@@ -525,8 +531,9 @@ def evaluate_clip(seed: int, clip: int, config: Config | None = None,
         if renderer == "scene":
             image, truth = render(replace(scene, seed=scene.seed + k), c)
         else:
-            look = replace(r3.look, seed=r3.look.seed + k, yaw_rate_deg_s=rate * CLIP_FPS)
-            image, truth = _render_cached(f"clips/{seed}-{clip}-{k}.png",
+            # A video's noise is drawn afresh each frame; its textures stay (Look.frame).
+            look = replace(r3.look, frame=k + 1, yaw_rate_deg_s=rate * CLIP_FPS)
+            image, truth = _render_cached(f"{CLIP_CACHE}/{seed}-{clip}-{k}.png",
                                           replace(r3, look=look), c)
         if mirrored:
             image, truth = mirror(image, truth)

@@ -661,7 +661,8 @@ def random_room(rng: np.random.Generator, width: int = 640, height: int = 480,
 
 def random_look(rng: np.random.Generator, spp: int = 16) -> Look:
     """A random :class:`Look` (all randomness from ``rng``): floor, walls, light, exposure,
-    yaw blur, lens, vignetting and noise, in the ranges real indoor footage shows."""
+    yaw blur, lens, vignetting and noise. :func:`random_room` draws each room's look here;
+    ``sitl.approach`` draws the look of a flown room here too."""
     return Look(
         floor=str(rng.choice(["planks", "carpet", "tiles"])),
         floor_gloss=float(rng.choice([0.0, 0.0, rng.uniform(0.05, 0.25)])),

@@ -118,4 +118,5 @@ def test_a_pathtraced_clip_is_rendered_once_then_read_back(tmp_path, monkeypatch
     assert len(first) == 2 and len(frames) == 2
     a, b = (cv2.imread(str(p)) for p in frames)
     assert np.abs(a.astype(int) - b.astype(int)).mean() > 1.0  # the camera yawed
+    assert all(p.parent.name == "clips-2" for p in frames)  # not the older renders' folder
     assert evaluate_clip(21, 0, frames=2, renderer="pathtraced") == first  # from the cache
