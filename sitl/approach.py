@@ -41,7 +41,7 @@ pipeline is not told of). The geometry, and so the collisions and the oracle, ar
 
 Time. Against the mock autopilot (the default) the vehicle moves in lock-step with the
 camera: each frame, the mock flies one camera period of simulated time and the companion
-runs on that clock, so a frame that takes 0.12 s to draw (1.5 s path-traced) costs no
+runs on that clock, so a frame that takes 0.12 s to draw (3 s path-traced) costs no
 flight time, as with a real camera. Against another autopilot (``--autopilot URL``, e.g.
 PX4 SITL) everything runs in real time and the harness assumes nothing of it: it maps the
 autopilot's local frame (origin, heading) onto the room where the vehicle hovers when the

@@ -343,7 +343,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="approach: who draws the camera's view: scene (flat-shaded, fast, "
                          "default) or pathtraced (the same room path-traced by Mitsuba 3: "
                          "shadows, textures, noise, yaw blur and a lens of its own; about "
-                         "1.5 s a frame; needs companion[render])")
+                         "3 s a frame; needs companion[render])")
     ap.add_argument("--spp", type=int, default=8,
                     help="approach, pathtraced: samples per pixel (default 8)")
     ap.add_argument("--json", metavar="PATH", help="approach: write the figures as JSON")
