@@ -66,6 +66,7 @@ import numpy as np
 from companion.config import Config, MavlinkConfig
 from companion.control.policy import TurnHistory, decide_frame, wrap_deg
 from companion.vision.lens import distort_maps
+from sitl.evaluate import RENDERERS
 from sitl.scene import (
     Box,
     Camera,
@@ -82,7 +83,6 @@ __all__ = ["Approach", "RunResult", "draw_approach", "fly_approach", "first_cont
            "format_report", "run_approaches", "summarize", "write_trajectories"]
 
 POLICIES = ("paper", "none", "oracle")
-RENDERERS = ("scene", "pathtraced")
 BODY_RADIUS_M = 0.25
 PASS_MARGIN_M = 1.0
 ROOM_LENGTH_M = (14.0, 18.0)

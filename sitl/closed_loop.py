@@ -34,6 +34,7 @@ from companion.config import Config, MavlinkConfig
 from companion.control.offboard import OffboardController
 from companion.control.policy import TurnHistory, decide_frame
 from companion.vision.pipeline import Pipeline
+from sitl.evaluate import RENDERERS
 from sitl.scene import EAST, NORTH, WEST, Box, Camera, Room, Scene, WallRect, render
 
 __all__ = ["LoopFrame", "LoopRun", "fly_alongside", "format_table", "hovering_autopilot",
@@ -339,7 +340,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="approach: the camera's radial distortion, OpenCV's k1 on "
                          "coordinates normalised by the focal length (< 0 barrel; default "
                          "0, a pinhole): every frame is taken through it")
-    ap.add_argument("--renderer", choices=("scene", "pathtraced"), default="scene",
+    ap.add_argument("--renderer", choices=RENDERERS, default="scene",
                     help="approach: who draws the camera's view: scene (flat-shaded, fast, "
                          "default) or pathtraced (the same room path-traced by Mitsuba 3: "
                          "shadows, textures, noise, yaw blur and a lens of its own; about "

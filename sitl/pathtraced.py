@@ -52,6 +52,7 @@ from sitl.scene import (
     random_colour,
     random_decorations,
     scene_truth,
+    yaw_axes,
 )
 
 __all__ = ["Furniture", "Look", "Room3D", "random_room", "random_look", "render", "truth",
@@ -161,6 +162,11 @@ class Look:
     spp: int = 16
     seed: int = 0  # textures, and the noise of a still
     frame: int = 0  # frame k of a video: its noise is drawn afresh, its textures stay
+
+    @property
+    def sampler_seed(self) -> int:
+        """The path tracer's seed: the still's, moved on by the frame of a video."""
+        return self.seed + self.frame
 
 
 @dataclass(frozen=True)
@@ -361,7 +367,7 @@ def _scene_dict(mi, r3: Room3D, cam: Camera, folder: str) -> dict:
         "near_clip": 0.05, "far_clip": 100.0,
         "to_world": _transform(mi, cols, cam.position),
         "sampler": {"type": "independent", "sample_count": look.spp,
-                    "seed": look.seed + look.frame},
+                    "seed": look.sampler_seed},
         "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height,
                  "rfilter": {"type": "gaussian"}, "pixel_format": "rgb"},
     }
@@ -433,8 +439,7 @@ def _scene_dict(mi, r3: Room3D, cam: Camera, folder: str) -> dict:
 
     # Furniture.
     for k, f in enumerate(r3.furniture):
-        a = math.radians(f.yaw_deg)
-        a1, a2 = np.array([math.cos(a), math.sin(a), 0.0]), np.array([-math.sin(a), math.cos(a), 0])
+        a1, a2 = yaw_axes(f.yaw_deg)
         if f.material == "wood":
             tex = _wood(rng, f.colour)
         elif f.material == "fabric":
@@ -451,8 +456,7 @@ def _scene_dict(mi, r3: Room3D, cam: Camera, folder: str) -> dict:
             d[f"f{k}p{j}"] = _cube(mi, centre, a1, a2, half, bsdf)
     if room.rug is not None:  # striped, as sitl.scene draws it: lines on the floor at its yaw
         rug = room.rug
-        a = math.radians(rug.yaw_deg)
-        a1, a2 = np.array([math.cos(a), math.sin(a), 0.0]), np.array([-math.sin(a), math.cos(a), 0])
+        a1, a2 = yaw_axes(rug.yaw_deg)
         tex = _carpet(rng, rug.albedo)
         tex[:, tex.shape[1] // 2:] *= 0.45  # 0.7 of the albedo, as displayed
         d["rug"] = _rect(mi, [rug.x, rug.y, -0.004], a1, -a2, rug.length / 2, rug.width / 2,
@@ -565,7 +569,7 @@ def render(r3: Room3D, cam: Camera) -> tuple[np.ndarray, SceneTruth]:
     mi = _mi()
     with tempfile.TemporaryDirectory(prefix="companion-") as folder:
         scene = mi.load_dict(_scene_dict(mi, r3, cam, folder))
-    linear = np.array(mi.render(scene, spp=r3.look.spp, seed=r3.look.seed + r3.look.frame))
+    linear = np.array(mi.render(scene, spp=r3.look.spp, seed=r3.look.sampler_seed))
     return develop(linear[..., :3], cam, r3.look), truth(r3, cam)
 
 

@@ -40,6 +40,7 @@ __all__ = [
     "render",
     "mirror",
     "orientations",
+    "yaw_axes",
     "random_colour",
     "random_decorations",
     "random_scene",
@@ -106,6 +107,13 @@ class Camera:
         return v if v[2] >= 0 else -v
 
 
+def yaw_axes(yaw_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """The horizontal unit axes (world NED) of a thing on the floor at ``yaw_deg``: along
+    its length, and across it to the right."""
+    a = math.radians(yaw_deg)
+    return np.array([math.cos(a), math.sin(a), 0.0]), np.array([-math.sin(a), math.cos(a), 0.0])
+
+
 @dataclass(frozen=True)
 class Box:
     """A box standing on the floor. ``yaw_deg`` is its length axis's heading."""
@@ -119,8 +127,7 @@ class Box:
     albedo: tuple[float, float, float] = (0.55, 0.45, 0.35)  # BGR, 0..1
 
     def axes(self) -> tuple[np.ndarray, np.ndarray]:
-        a = math.radians(self.yaw_deg)
-        return np.array([math.cos(a), math.sin(a), 0.0]), np.array([-math.sin(a), math.cos(a), 0.0])
+        return yaw_axes(self.yaw_deg)
 
     def footprint(self) -> np.ndarray:
         """Four floor corners (4×3), counter-clockwise seen from above."""
