@@ -21,7 +21,11 @@ def test_eta_converges_into_the_deadband_without_overshoot_or_oscillation(eta0, 
     assert first.eta_deg is not None and math.copysign(1, first.eta_deg) == math.copysign(1, eta0)
     assert first.action == ("right" if eta0 > 0 else "left"), table
     assert run.converged and run.converged_at <= MAX_FRAMES, table
-    assert run.overshoot_deg < 5.0, table
+    # No overshoot out of the deadband on the far side (that would be the start of an
+    # oscillation). Inside it the vehicle may drift past 0: a frame read wrong while it
+    # hovers there turns it a little further (docs/flight.md, "Overshoot inside the
+    # deadband"), and where it comes to rest depends on the machine's frame timing.
+    assert run.overshoot_deg < run.deadband_deg, table
     assert run.sign_changes == 0, table
     # Table IV: |η| falls frame after frame until it is inside the deadband.
     before = [abs(f.true_eta_deg) for f in run.frames[: run.converged_at]]
