@@ -183,6 +183,39 @@ def test_self_calibration_keeps_the_better_supported_of_two_consistent_focal_len
     assert room == pytest.approx([paired[0], v1[0]], abs=3.0)
 
 
+def test_a_settled_video_keeps_its_focal_length_against_one_frames_fixed_point():
+    # The video's focal length has settled at 554 px (a 60° lens). A frame shows the near
+    # wall's VP and a rotated obstacle's edges where a 90° lens would put the far wall's,
+    # but not the far wall: alone, it would take the obstacle's edges for V2 at 320 px.
+    from companion.vision.pipeline import FOCAL_WARMUP, Pipeline, RunningFocal
+
+    rng = np.random.default_rng(5)
+    f, a = 554.0, 275.0
+    v1, obstacle_vp = C + [a, 0.0], C - [320.0**2 / a, 0.0]
+
+    def starts(n, ys):
+        return np.column_stack([rng.uniform(20, W - 20, n), rng.uniform(*ys, n)])
+
+    xs = rng.uniform(20, W - 20, 12)
+    segs = np.vstack([
+        _toward(v1, starts(20, (20, H - 20)), 80),
+        _toward(obstacle_vp, starts(12, (300, 460)), 80),
+        np.column_stack([xs, np.full(12, 100.0), xs, np.full(12, 300.0)]),
+    ])
+    alone, _ = Pipeline()._layout(segs, W, H)
+    assert alone.focal_px == pytest.approx(320.0, rel=0.03)
+
+    pipe = Pipeline()
+    pipe._focal_size, pipe.running_focal = (W, H), RunningFocal((f,) * FOCAL_WARMUP)
+    layout, source = pipe._layout(segs, W, H)
+    assert (source, layout.focal_px) == ("estimated", f)
+    assert to_pixels(layout.vps[V1]) == pytest.approx(v1, abs=3.0)
+    assert not layout.observed[V2]  # the obstacle's edges are not the far wall
+    # The frame still votes, so a video whose first frames misled it can recover.
+    assert pipe.running_focal.estimates_px[-1] == pytest.approx(320.0, rel=0.03)
+    assert pipe.running_focal.focal_px == f
+
+
 def test_layout_without_segments_is_not_found_and_finite():
     layout = detect_layout_vps(np.empty((0, 4)), W, H, F)
     assert not layout.found

@@ -288,15 +288,18 @@ class Pipeline:
 
         Otherwise self-calibration: V1 and V2 are orthogonal in space, so when both are
         finite they fix ``f`` (:func:`focal_from_orthogonal_vps`), and each frame's
-        estimate joins the video's :class:`RunningFocal`. Once that has settled, a frame
-        is searched with the running estimate alone (``estimated``): one VP search per
-        frame instead of several. Until then each frame calibrates itself: VPs found with
-        an assumed focal length (each of ``SELF_CALIBRATION_GUESSES`` in turn) give ``f``,
-        and the VPs are found again with it (``estimated``). An estimate the VPs found with
-        it give back (within ``SELF_CALIBRATION_TOL``) is confirmed; of several confirmed,
-        the earliest guess's, unless a later one's VPs have clearly more support
-        (``SELF_CALIBRATION_MARGIN``). Without a confirmed estimate, the first unconfirmed
-        one; else ``assumed``.
+        estimate joins the video's :class:`RunningFocal`. Until that has settled, each
+        frame calibrates itself (:meth:`_calibrate`). Once it has, a frame is searched with
+        the running estimate alone (``estimated``): one VP search per frame instead of
+        several.
+
+        A settled video's frame whose VPs under the running estimate imply another focal
+        length (beyond ``SETTLED_TOL``), or show no V1–V2 pair, still calibrates itself
+        and its estimate joins the running one, so that a video whose first frames misled
+        it recovers. But its layout stays the one found with the running estimate, if that
+        found V1: one frame's fixed point can pair V1 with a rotated obstacle's edges at
+        twice the true focal length, and the median of the video's frames is the better
+        evidence.
         """
         vp = self.config.vision.vanishing
         if self.config.camera.focal_px:
@@ -304,30 +307,47 @@ class Pipeline:
                                      self._known_focal_vp), "given"
         if self._focal_size != (w, h):  # another camera: its lens is another question
             self._focal_size, self.running_focal = (w, h), RunningFocal()
-        centre = principal_point(w, h)
-
-        def estimate(layout):
-            f = _orthogonal_focal(layout, centre)
-            return f if f is not None and FOCAL_RANGE[0] * w <= f <= FOCAL_RANGE[1] * w else None
 
         guesses = [g * w for g in SELF_CALIBRATION_GUESSES]
-        if self.running_focal.settled:
-            f_run = self.running_focal.focal_px
-            layout = detect_layout_vps(segments, w, h, f_run, vp)
-            f = estimate(layout)
-            if f is not None and abs(f - f_run) <= SETTLED_TOL * f_run:
-                self.running_focal = self.running_focal.add(f)
-                return layout, "estimated"
-            # This frame disagrees with the video's focal length, or shows no V1–V2 pair
-            # under it: it calibrates itself, starting from the running estimate.
-            guesses.insert(0, f_run)
+        if not self.running_focal.settled:
+            layout, source = self._calibrate(segments, w, h, guesses)
+            if source == "estimated":
+                self.running_focal = self.running_focal.add(layout.focal_px)
+            return layout, source
 
+        f_run = self.running_focal.focal_px
+        layout = detect_layout_vps(segments, w, h, f_run, vp)
+        f = _orthogonal_focal(layout, principal_point(w, h))
+        if f is not None and abs(f - f_run) <= SETTLED_TOL * f_run:
+            self.running_focal = self.running_focal.add(f)
+            return layout, "estimated"
+        # This frame disagrees with the video's focal length, or shows no V1–V2 pair
+        # under it: it calibrates itself, starting from the running estimate, and votes.
+        own, source = self._calibrate(segments, w, h, [f_run, *guesses])
+        if source == "estimated":
+            self.running_focal = self.running_focal.add(own.focal_px)
+        return (layout, "estimated") if layout.observed[V1] else (own, source)
+
+    def _calibrate(self, segments: np.ndarray, w: int, h: int,
+                   guesses: list[float]) -> tuple[LayoutVPs, str]:
+        """One frame's self-calibration: its layout, ``estimated`` or ``assumed``.
+
+        VPs found with each focal length of ``guesses`` (pixels) in turn give ``f``
+        (V1 ⟂ V2, kept within ``FOCAL_RANGE``), and the VPs are found again with it. An
+        estimate the VPs found with it give back (within ``SELF_CALIBRATION_TOL``) is
+        confirmed; of several confirmed, the earliest guess's, unless a later one's VPs
+        have clearly more support (``SELF_CALIBRATION_MARGIN``). Without a confirmed
+        estimate, the first unconfirmed one; without any, the first guess's VPs
+        (``assumed``). The layout's ``focal_px`` is the focal length it was found with.
+        """
+        vp = self.config.vision.vanishing
+        centre = principal_point(w, h)
         first = unconfirmed = best = None
         for guess in guesses:
             layout = detect_layout_vps(segments, w, h, guess, vp)
             first = first or layout
-            f = estimate(layout)
-            if f is None:
+            f = _orthogonal_focal(layout, centre)
+            if f is None or not FOCAL_RANGE[0] * w <= f <= FOCAL_RANGE[1] * w:
                 continue
             again = detect_layout_vps(segments, w, h, f, vp)
             f_again = _orthogonal_focal(again, centre)
@@ -342,10 +362,8 @@ class Pipeline:
                 continue
             unconfirmed = unconfirmed or again
         if best is not None:
-            self.running_focal = self.running_focal.add(best.focal_px)
             return best, "estimated"
         if unconfirmed is not None:
-            self.running_focal = self.running_focal.add(unconfirmed.focal_px)
             return unconfirmed, "estimated"
         return first, "assumed"
 
