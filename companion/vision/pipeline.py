@@ -171,6 +171,11 @@ def _orthogonal_focal(layout: LayoutVPs, centre: np.ndarray) -> float | None:
     return focal_from_orthogonal_vps(layout.vps[V1], layout.vps[V2], centre)
 
 
+def _plausible(focal_px: float | None, width: int) -> bool:
+    """Whether an estimate is a focal length at all: within ``FOCAL_RANGE`` frame widths."""
+    return focal_px is not None and FOCAL_RANGE[0] * width <= focal_px <= FOCAL_RANGE[1] * width
+
+
 @dataclass(frozen=True)
 class Estimate:
     """What one frame says.
@@ -318,7 +323,7 @@ class Pipeline:
         f_run = self.running_focal.focal_px
         layout = detect_layout_vps(segments, w, h, f_run, vp)
         f = _orthogonal_focal(layout, principal_point(w, h))
-        if f is not None and abs(f - f_run) <= SETTLED_TOL * f_run:
+        if _plausible(f, w) and abs(f - f_run) <= SETTLED_TOL * f_run:
             self.running_focal = self.running_focal.add(f)
             return layout, "estimated"
         # This frame disagrees with the video's focal length, or shows no V1–V2 pair
@@ -347,7 +352,7 @@ class Pipeline:
             layout = detect_layout_vps(segments, w, h, guess, vp)
             first = first or layout
             f = _orthogonal_focal(layout, centre)
-            if f is None or not FOCAL_RANGE[0] * w <= f <= FOCAL_RANGE[1] * w:
+            if not _plausible(f, w):
                 continue
             again = detect_layout_vps(segments, w, h, f, vp)
             f_again = _orthogonal_focal(again, centre)
