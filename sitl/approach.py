@@ -66,8 +66,8 @@ import numpy as np
 from companion.config import Config, MavlinkConfig
 from companion.control.policy import TurnHistory, decide_frame, wrap_deg
 from companion.vision.lens import distort_maps
-from sitl.evaluate import RENDERERS
 from sitl.scene import (
+    RENDERERS,
     Box,
     Camera,
     Room,

@@ -34,8 +34,18 @@ from companion.config import Config, MavlinkConfig
 from companion.control.offboard import OffboardController
 from companion.control.policy import TurnHistory, decide_frame
 from companion.vision.pipeline import Pipeline
-from sitl.evaluate import RENDERERS
-from sitl.scene import EAST, NORTH, WEST, Box, Camera, Room, Scene, WallRect, render
+from sitl.scene import (
+    EAST,
+    NORTH,
+    RENDERERS,
+    WEST,
+    Box,
+    Camera,
+    Room,
+    Scene,
+    WallRect,
+    render,
+)
 
 __all__ = ["LoopFrame", "LoopRun", "fly_alongside", "format_table", "hovering_autopilot",
            "loop_scene", "run_closed_loop", "sitl_link", "write_plot", "STARTS_DEG"]

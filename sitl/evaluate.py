@@ -50,7 +50,15 @@ import numpy as np
 from companion.config import Config
 from companion.vision.lens import distort_px
 from companion.vision.pipeline import Pipeline
-from sitl.scene import ObstacleTruth, SceneTruth, mirror, orientations, random_scene, render
+from sitl.scene import (
+    RENDERERS,
+    ObstacleTruth,
+    SceneTruth,
+    mirror,
+    orientations,
+    random_scene,
+    render,
+)
 
 __all__ = ["SceneResult", "EvalReport", "evaluate_scene", "run_eval", "format_report",
            "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
@@ -63,8 +71,6 @@ TARGETS = {
     "false_positive_rate": 0.05,
     "corner_err_pct": 8.0,
 }
-
-RENDERERS = ("scene", "pathtraced")
 
 SPLITS = {
     ("scene", "dev"): (0, 200),

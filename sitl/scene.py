@@ -46,7 +46,11 @@ __all__ = [
     "random_scene",
     "write_video",
     "yaw_sweep",
+    "RENDERERS",
 ]
+
+RENDERERS = ("scene", "pathtraced")
+"""The renderers a scene can be drawn by: this module's, and :mod:`sitl.pathtraced`'s."""
 
 # Surface ids: room surfaces 0..5, wall clutter none; box k face j: 100 + 10 k + j.
 FLOOR, CEILING, NORTH, SOUTH, EAST, WEST = range(6)
