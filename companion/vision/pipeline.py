@@ -328,13 +328,13 @@ class Pipeline:
             return layout, "estimated"
         # This frame disagrees with the video's focal length, or shows no V1–V2 pair
         # under it: it calibrates itself, starting from the running estimate, and votes.
-        own, source = self._calibrate(segments, w, h, [f_run, *guesses])
+        own, source = self._calibrate(segments, w, h, [f_run, *guesses], found=layout)
         if source == "estimated":
             self.running_focal = self.running_focal.add(own.focal_px)
         return (layout, "estimated") if layout.observed[V1] else (own, source)
 
-    def _calibrate(self, segments: np.ndarray, w: int, h: int,
-                   guesses: list[float]) -> tuple[LayoutVPs, str]:
+    def _calibrate(self, segments: np.ndarray, w: int, h: int, guesses: list[float],
+                   found: LayoutVPs | None = None) -> tuple[LayoutVPs, str]:
         """One frame's self-calibration: its layout, ``estimated`` or ``assumed``.
 
         VPs found with each focal length of ``guesses`` (pixels) in turn give ``f``
@@ -344,12 +344,14 @@ class Pipeline:
         have clearly more support (``SELF_CALIBRATION_MARGIN``). Without a confirmed
         estimate, the first unconfirmed one; without any, the first guess's VPs
         (``assumed``). The layout's ``focal_px`` is the focal length it was found with.
+        ``found``: the VPs already found with the first guess, not searched again.
         """
         vp = self.config.vision.vanishing
         centre = principal_point(w, h)
         first = unconfirmed = best = None
-        for guess in guesses:
-            layout = detect_layout_vps(segments, w, h, guess, vp)
+        for k, guess in enumerate(guesses):
+            layout = found if k == 0 and found is not None else detect_layout_vps(
+                segments, w, h, guess, vp)
             first = first or layout
             f = _orthogonal_focal(layout, centre)
             if not _plausible(f, w):
