@@ -422,6 +422,41 @@ def test_a_leg_at_each_end_takes_the_edges_other_legs_into_its_fit():
     assert with_bottom_u < 0.7 * alone  # without it the fit is the same as alone
 
 
+def test_a_leg_at_each_end_is_not_the_edges_where_a_room_edge_comes_nearer_the_end():
+    # A door frame's vertical edge, its lintel (toward V1) at the top, and two faint lines
+    # beside its ends (a reflection, a texture) a few pixels off, which happen to cross
+    # the horizon at a right angle as a box 35° off the room's top and bottom edges would.
+    # The lintel comes nearer the top end on the faint line's side: the end is the door
+    # frame's corner, not a box's. No Table-I corner, so only the edge rules run.
+    from companion.vision.obstacles import find_obstacles
+
+    a = np.radians(35.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    foot = np.array([-0.2, 1.2, 4.0])  # on the floor, 1.2 m below the camera
+    top = foot + [0.0, -2.0, 0.0]
+    b, t, t_u, b_v = _project([foot, top, top + 0.6 * u, foot + 0.8 * v])
+    along = (t_u - t) / np.linalg.norm(t_u - t)
+    faint_top = [*(t + 4.0 * along), *t_u]  # 4 px short of the end, on its line
+    side = np.sign(along[0])
+
+    def found(lintel_gap_px=None, lintel_end=None):
+        segs = [[*b, *t], faint_top, [*b, *b_v]]
+        if lintel_gap_px is not None:
+            start = t + [side * lintel_gap_px, 0.0]
+            end = t + [side * 80.0, 0.0] if lintel_end is None else lintel_end
+            segs.append([*start, *end])
+        segs = np.array(segs)
+        labels = np.array([V3, NONE, NONE, V1][:len(segs)])
+        no_corners = find_corners(segs, labels).take(np.zeros(0, int))
+        return find_obstacles(segs, no_corners, _room_layout(), labels == NONE, labels)
+
+    assert len(found()) == 1  # a box's edge, as far as these lines tell
+    assert found(0.0) == []  # the lintel meets the end: a door frame
+    assert len(found(3.5)) == 1  # within a pixel of the faint line's reach: not nearer
+    # A V1-labelled edge that points at the OVP the top line gives is the box's own.
+    assert len(found(0.0, t + 80.0 * along)) == 1
+
+
 def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
     # The top corner of a box 35° off the room, its vertical edge down to the floor, and no
     # legs at the bottom: both OVPs are where the top legs cross the horizon, which for a

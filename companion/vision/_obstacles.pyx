@@ -41,6 +41,7 @@ cdef struct Params:
     bint hidden_edge_corners
     double radius_px
     double leg_gap_frac
+    double noise_px
 
 
 # What every step needs of the layout: the camera, V3's direction, the horizon and the
@@ -432,7 +433,38 @@ cdef list edge_legs(double[:, ::1] s, double[::1] lengths, list chains,
     return out
 
 
-cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] lines, list edges,
+cdef bint room_leg_nearer(Frame* fr, Params* p, double[:, ::1] s, double[::1] lengths,
+                          Py_ssize_t[::1] manhattan_idx, tuple chain, int end, Py_ssize_t leg,
+                          const double* d1, const double* d2) noexcept:
+    """Whether a Manhattan segment (``manhattan_idx``: V1 or V2 beyond doubt) leaves end
+    ``end`` of the vertical edge ``chain`` toward the side of ``leg`` and comes nearer that
+    end than ``leg`` does, by more than ``noise_px``, pointing at neither OVP (directions
+    ``d1``, ``d2``) within ``member_angle_deg``. The end is then a door frame's or a
+    picture's corner, and ``leg`` a reflection, a shadow or a texture beside it. Near the
+    horizon a box's own edge can be labelled V1 or V2, but it points at one of its OVPs."""
+    cdef double axx = (chain[2] - chain[0]) / chain[4], axy = (chain[3] - chain[1]) / chain[4]
+    cdef double ex = chain[2 * end], ey = chain[2 * end + 1], side
+    cdef double o1[3]
+    cdef double o2[3]
+    cdef double reach = end_distance(s, leg, ex, ey) - p.noise_px
+    cdef bint leg_right = _side(s, leg, ex, ey, axx, axy) > 0
+    cdef Py_ssize_t j, k
+    pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+    pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
+    for j in range(manhattan_idx.shape[0]):
+        k = manhattan_idx[j]
+        if not leaves_end(s, lengths, k, ex, ey, axx, axy, p, &side) \
+                or (side > 0) != leg_right or end_distance(s, k, ex, ey) >= reach:
+            continue
+        if vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o1)) > p.member_angle_deg \
+                and vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o2)) \
+                > p.member_angle_deg:
+            return True
+    return False
+
+
+cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] lengths,
+                            double[:, ::1] lines, list edges, Py_ssize_t[::1] manhattan_idx,
                             Hypotheses* halves) except *:
     """One OVP from each vertical edge whose two ends both show a leg on the same side.
 
@@ -454,6 +486,9 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] lines, list edg
                     continue
                 direction_of(fr, o, d)
                 if horizon_error(fr, d) > p.horizon_tol_deg or not off_layout(fr, p, d):
+                    continue
+                if room_leg_nearer(fr, p, s, lengths, manhattan_idx, chain, 0, ka, d, d) \
+                        or room_leg_nearer(fr, p, s, lengths, manhattan_idx, chain, 1, kb, d, d):
                     continue
                 h = new_hypothesis(halves)
                 h.d1[0], h.d1[1], h.d1[2] = d[0], d[1], d[2]
@@ -541,7 +576,8 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
         h.npoints = 2
 
 
-cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list edges,
+cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] s, double[::1] lengths,
+                             double[:, ::1] lines, list edges, Py_ssize_t[::1] manhattan_idx,
                              Hypotheses* found) except *:
     """A leg at each end of one vertical edge whose horizon crossings are orthogonal OVPs.
 
@@ -568,6 +604,9 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] lines, list ed
                 if ka == kb:
                     continue
                 if not horizon_ovps(fr, p, lines, ka, kb, d1, d2, &ortho) or ortho >= best:
+                    continue
+                if room_leg_nearer(fr, p, s, lengths, manhattan_idx, chain, 0, ka, d1, d2) \
+                        or room_leg_nearer(fr, p, s, lengths, manhattan_idx, chain, 1, kb, d1, d2):
                     continue
                 best = ortho
                 for k in range(3):
@@ -1116,7 +1155,8 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
 
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
          double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
-         double radius_px, double leg_gap_frac, double min_leg_sin, bint room_seen):
+         double radius_px, double leg_gap_frac, double min_leg_sin, bint room_seen,
+         double noise_px):
     """Obstacles from Table-I corners and vertical edges (see
     :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
     corners_px K×2, pairs, height_px, λ3)."""
@@ -1135,6 +1175,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.hidden_edge_corners = params.hidden_edge_corners
     p.radius_px = radius_px
     p.leg_gap_frac = leg_gap_frac
+    p.noise_px = noise_px
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
     cdef Py_ssize_t n = s.shape[0], i, k, g, nh
     if n == 0:
@@ -1187,6 +1228,9 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     cdef double lam3
     cdef Hypothesis* h
     cdef Py_ssize_t[::1] room_idx = np.flatnonzero((lab >= 0) & (lab != vertical_label))
+    # V1 or V2 beyond doubt (:func:`companion.vision.corners.obstacle_legs`).
+    cdef Py_ssize_t[::1] manhattan_idx = np.flatnonzero(
+        ~np.asarray(free_legs, bool) & (lab != vertical_label))
     try:
         if nc and verticals.shape[0]:
             # Pairs (eqs. 5–8): each Table-I corner's vertical edge followed to its other
@@ -1221,10 +1265,10 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
         chains = vertical_chains(s, lengths, lines, verticals, &p)
         edges = edge_legs(s, lengths, chains, free_idx, &p)
-        silhouette_halves(&fr, &p, lines, edges, &halves)
+        silhouette_halves(&fr, &p, s, lengths, lines, edges, manhattan_idx, &halves)
         pair_halves(&fr, &p, &halves, &found)
         if found.count == 0:
-            edge_horizon_pairs(&fr, &p, lines, edges, &found)
+            edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
         if found.count == 0 and p.hidden_edge_corners:
             junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx, &found)
         if found.count == 0 and room_seen:

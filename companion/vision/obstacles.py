@@ -87,6 +87,7 @@ def find_obstacles(
     radius_px: float = 10.0,
     leg_gap_frac: float = 0.15,
     min_leg_angle_deg: float = 12.0,
+    noise_px: float = 1.0,
 ) -> list[Obstacle]:
     """Obstacles from Table-I corners, best supported first: most consistent corner pairs
     (hypotheses of one box from a stray pair are common, from many pairs rare), then the
@@ -101,7 +102,9 @@ def find_obstacles(
     unless a room edge leaves the vertical edge's far end inside the frame (a door frame or
     an aligned box, with a rug's or a shadow's corner at its foot).
     When no pair is found this way, boxes that show fewer corners are looked for: leg
-    junctions one above the other; vertical edges with a leg at each end; (with
+    junctions one above the other; vertical edges with a leg at each end (at an end where
+    a room edge comes nearer than the leg, by more than ``noise_px``, on the leg's side,
+    the end is a door frame's corner and the leg not the edge's); (with
     ``hidden_edge_corners``) two legs meeting where no vertical edge shows, one of them
     running on to a vertical edge at its far end; a box showing one face; and last a
     face's top edge with vertical edges hanging from it (a table seen from the front, its
@@ -109,14 +112,15 @@ def find_obstacles(
 
     Inputs: ``segments`` N×4 pixels; ``corners`` already filtered by Table I;
     ``layout`` the frame's layout VPs; ``free`` N bool, segments that may be obstacle
-    legs (not V3, not tightly V1/V2); ``labels`` N segment labels (V3 = vertical).
+    legs (not V3, not tightly V1/V2); ``labels`` N segment labels (V3 = vertical);
+    ``noise_px`` how far two segment ends may be apart and not be told nearer or farther.
     Output: a list of :class:`Obstacle`, possibly empty.
     """
     p = params or ObstacleParams()
     found = find(segments, corners.points_px, corners.s, corners.n, corners.r, layout.vps,
                  layout.focal_px, layout.centre[0], layout.centre[1], free, labels, V3, p,
                  radius_px, leg_gap_frac, math.sin(math.radians(min_leg_angle_deg)),
-                 layout.observed[V1] and layout.observed[V2])
+                 layout.observed[V1] and layout.observed[V2], noise_px)
     obstacles = [Obstacle(*fields) for fields in found]
     obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles

@@ -512,6 +512,7 @@ class Pipeline:
                 radius_px=vc.corners.radius_px,
                 leg_gap_frac=vc.corners.leg_gap_frac,
                 min_leg_angle_deg=vc.corners.min_leg_angle_deg,
+                noise_px=vc.corners.manhattan_leg_noise_px,
             )
             if layout.found
             else []
