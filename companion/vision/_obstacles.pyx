@@ -433,6 +433,15 @@ cdef list edge_legs(double[:, ::1] s, double[::1] lengths, list chains,
     return out
 
 
+cdef inline bint points_at_neither(double[:, ::1] s, Py_ssize_t k, const double* o1,
+                                   const double* o2, double tol_deg) noexcept nogil:
+    """Whether segment ``k`` points at neither of the pixel points ``o1``, ``o2`` within
+    ``tol_deg``: a room edge that points at a box's OVP may be the box's own, labelled V1
+    or V2 near the horizon."""
+    return (vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o1)) > tol_deg
+            and vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o2)) > tol_deg)
+
+
 cdef bint room_leg_nearer(Frame* fr, Params* p, double[:, ::1] s, double[::1] lengths,
                           Py_ssize_t[::1] manhattan_idx, tuple chain, int end, Py_ssize_t leg,
                           const double* d1, const double* d2) noexcept:
@@ -456,9 +465,7 @@ cdef bint room_leg_nearer(Frame* fr, Params* p, double[:, ::1] s, double[::1] le
         if not leaves_end(s, lengths, k, ex, ey, axx, axy, p, &side) \
                 or (side > 0) != leg_right or end_distance(s, k, ex, ey) >= reach:
             continue
-        if vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o1)) > p.member_angle_deg \
-                and vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o2)) \
-                > p.member_angle_deg:
+        if points_at_neither(s, k, o1, o2, p.member_angle_deg):
             return True
     return False
 
@@ -704,9 +711,7 @@ cdef bint room_edge_at(double[:, ::1] s, double[::1] lengths, tuple chain,
                 break
         else:
             continue
-        if vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o1)) > p.member_angle_deg \
-                and vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o2)) \
-                > p.member_angle_deg:
+        if points_at_neither(s, k, o1, o2, p.member_angle_deg):
             return True
     return False
 
