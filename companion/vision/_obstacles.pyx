@@ -479,7 +479,8 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] 
     legs only: the vertical edge and one horizontal edge at each end. When the two
     horizontal edges bound one face they are parallel in space and meet at that face's
     OVP (eqs. 6–8 with one leg per corner), which must lie on the horizon and away from
-    V1 and V2."""
+    V1 and V2. A leg that a room edge beats to its end is not the edge's
+    (:func:`room_leg_nearer`)."""
     cdef double o[3]
     cdef double d[3]
     cdef Py_ssize_t ka, kb
@@ -594,7 +595,8 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] s, double[::1]
     two legs at one end may be a rug's corner touching a door frame. Per edge, its most
     orthogonal pair (the first on ties). The edge's other legs, up to four in all, go with
     it: one short leg's horizon crossing moves by degrees for a pixel of noise, and the
-    box fit (:func:`obstacle`) rests each OVP on every leg that points at it."""
+    box fit (:func:`obstacle`) rests each OVP on every leg that points at it. A leg that a
+    room edge beats to its end is not the edge's (:func:`room_leg_nearer`)."""
     cdef double d1[3]
     cdef double d2[3]
     cdef double b1[3]
