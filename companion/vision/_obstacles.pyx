@@ -442,31 +442,33 @@ cdef inline bint points_at_neither(double[:, ::1] s, Py_ssize_t k, const double*
             and vp_angle_deg(vp_sin(s[k, 0], s[k, 1], s[k, 2], s[k, 3], o2)) > tol_deg)
 
 
-cdef bint room_leg_nearer(Frame* fr, Params* p, double[:, ::1] s, double[::1] lengths,
-                          Py_ssize_t[::1] manhattan_idx, tuple chain, int end, Py_ssize_t leg,
-                          const double* d1, const double* d2) noexcept:
-    """Whether a Manhattan segment (``manhattan_idx``: V1 or V2 beyond doubt) leaves end
-    ``end`` of the vertical edge ``chain`` toward the side of ``leg`` and comes nearer that
-    end than ``leg`` does, by more than ``noise_px``, pointing at neither OVP (directions
-    ``d1``, ``d2``) within ``member_angle_deg``. The end is then a door frame's or a
-    picture's corner, and ``leg`` a reflection, a shadow or a texture beside it. Near the
-    horizon a box's own edge can be labelled V1 or V2, but it points at one of its OVPs."""
+cdef bint room_leg_nearer(Params* p, double[:, ::1] s, double[::1] lengths,
+                          Py_ssize_t[::1] manhattan_idx, tuple chain, Py_ssize_t leg_a,
+                          Py_ssize_t leg_b, const double* o1, const double* o2) noexcept:
+    """Whether at either end of the vertical edge ``chain`` (``leg_a`` leaving its first
+    end, ``leg_b`` its second) a Manhattan segment (``manhattan_idx``: V1 or V2 beyond
+    doubt) leaves toward the side of that end's leg and comes nearer the end than the leg
+    does, by more than ``noise_px``, pointing at neither OVP (pixel points ``o1``, ``o2``)
+    within ``member_angle_deg``. The end is then a door frame's or a picture's corner, and
+    the leg a reflection, a shadow or a texture beside it. Near the horizon a box's own
+    edge can be labelled V1 or V2, but it points at one of its OVPs."""
     cdef double axx = (chain[2] - chain[0]) / chain[4], axy = (chain[3] - chain[1]) / chain[4]
-    cdef double ex = chain[2 * end], ey = chain[2 * end + 1], side
-    cdef double o1[3]
-    cdef double o2[3]
-    cdef double reach = end_distance(s, leg, ex, ey) - p.noise_px
-    cdef bint leg_right = _side(s, leg, ex, ey, axx, axy) > 0
-    cdef Py_ssize_t j, k
-    pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
-    pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
-    for j in range(manhattan_idx.shape[0]):
-        k = manhattan_idx[j]
-        if not leaves_end(s, lengths, k, ex, ey, axx, axy, p, &side) \
-                or (side > 0) != leg_right or end_distance(s, k, ex, ey) >= reach:
-            continue
-        if points_at_neither(s, k, o1, o2, p.member_angle_deg):
-            return True
+    cdef double ex, ey, reach, side
+    cdef bint leg_right
+    cdef Py_ssize_t j, k, leg
+    cdef int end
+    for end in range(2):
+        leg = leg_a if end == 0 else leg_b
+        ex, ey = chain[2 * end], chain[2 * end + 1]
+        reach = end_distance(s, leg, ex, ey) - p.noise_px
+        leg_right = _side(s, leg, ex, ey, axx, axy) > 0
+        for j in range(manhattan_idx.shape[0]):
+            k = manhattan_idx[j]
+            if not leaves_end(s, lengths, k, ex, ey, axx, axy, p, &side) \
+                    or (side > 0) != leg_right or end_distance(s, k, ex, ey) >= reach:
+                continue
+            if points_at_neither(s, k, o1, o2, p.member_angle_deg):
+                return True
     return False
 
 
@@ -495,8 +497,7 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] 
                 direction_of(fr, o, d)
                 if horizon_error(fr, d) > p.horizon_tol_deg or not off_layout(fr, p, d):
                     continue
-                if room_leg_nearer(fr, p, s, lengths, manhattan_idx, chain, 0, ka, d, d) \
-                        or room_leg_nearer(fr, p, s, lengths, manhattan_idx, chain, 1, kb, d, d):
+                if room_leg_nearer(p, s, lengths, manhattan_idx, chain, ka, kb, o, o):
                     continue
                 h = new_hypothesis(halves)
                 h.d1[0], h.d1[1], h.d1[2] = d[0], d[1], d[2]
@@ -601,6 +602,8 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] s, double[::1]
     cdef double d2[3]
     cdef double b1[3]
     cdef double b2[3]
+    cdef double o1[3]
+    cdef double o2[3]
     cdef double ortho, best
     cdef Py_ssize_t ka, kb, k
     cdef Hypothesis* h
@@ -614,8 +617,9 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] s, double[::1]
                     continue
                 if not horizon_ovps(fr, p, lines, ka, kb, d1, d2, &ortho) or ortho >= best:
                     continue
-                if room_leg_nearer(fr, p, s, lengths, manhattan_idx, chain, 0, ka, d1, d2) \
-                        or room_leg_nearer(fr, p, s, lengths, manhattan_idx, chain, 1, kb, d1, d2):
+                pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+                pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
+                if room_leg_nearer(p, s, lengths, manhattan_idx, chain, ka, kb, o1, o2):
                     continue
                 best = ortho
                 for k in range(3):
