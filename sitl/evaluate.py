@@ -107,6 +107,9 @@ class SceneResult:
     range_est_m: float | None = None
     range_true_m: float | None = None  # the true floor corner nearest the measured one
     mirrored: bool = False  # the frame was mirrored left to right (sitl.scene.mirror)
+    kind: str | None = None  # the compared obstacle's furniture kind (box, table, …)
+    focal_est_px: float | None = None  # the focal length the pipeline used (given or estimated)
+    focal_true_px: float | None = None
 
 
 RANGE_BANDS = ((1.0, 3.0), (3.0, 6.0))
@@ -155,8 +158,28 @@ class EvalReport:
             "eta_err_p90_deg": float(np.percentile(err, 90)) if len(err) else None,
             "corner_err_pct": float(np.mean(corners)) if corners else None,
             "latency_ms_median": float(np.median(lat)) if len(lat) else None,
+            **self.focal_figures(),
+            **self.kind_figures(),
             **self.range_figures(),
         }
+
+    def focal_figures(self) -> dict[str, float | None]:
+        """Relative error ``|f_used / f_true − 1|`` of the focal length the pipeline
+        rested on, over every frame: median and p90 (0 when it was given)."""
+        rel = np.array([abs(r.focal_est_px / r.focal_true_px - 1.0) for r in self.results
+                        if r.focal_est_px and r.focal_true_px])
+        return {"focal_err_median": float(np.median(rel)) if len(rel) else None,
+                "focal_err_p90": float(np.percentile(rel, 90)) if len(rel) else None}
+
+    def kind_figures(self) -> dict[str, int]:
+        """Detectable obstacles and detections by furniture kind: ``detectable_<kind>``,
+        ``detected_<kind>``."""
+        out: dict[str, int] = {}
+        for r in self._pick(lambda r: r.detectable and r.kind):
+            out[f"detectable_{r.kind}"] = out.get(f"detectable_{r.kind}", 0) + 1
+            out[f"detected_{r.kind}"] = (out.get(f"detected_{r.kind}", 0)
+                                         + (r.eta_est_deg is not None))
+        return out
 
     def range_figures(self) -> dict[str, float | int | None]:
         """Relative error of ``range_m`` against the true floor contact, by distance band
@@ -298,6 +321,9 @@ def evaluate_scene(
         range_est_m=est.range_m,
         range_true_m=range_true,
         mirrored=mirrored,
+        kind=None if target is None else target.kind,
+        focal_est_px=est.focal_px,
+        focal_true_px=truth.focal_px,
     )
 
 
@@ -426,7 +452,7 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
         given += "; each frame also mirrored left to right, the two pooled"
     lines = [f"renderer {renderer}: focal length {given}",
              f"{'camera':<14} {'split':<5} {'seed':>5} {'det %':>6} {'η med°':>7} {'η p90°':>7} "
-             f"{'FP %':>5} {'sign✗':>7} {'corner %':>8}   targets det/med/p90"]
+             f"{'FP %':>5} {'sign✗':>7} {'corner %':>8} {'f err %':>10}   targets det/med/p90"]
     for label, *_ in CAMERAS:
         t = _split_target(label)
         for split, by_camera in reports.items():
@@ -445,8 +471,17 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
                 f"{deg(f['eta_err_median_deg']):>7} {deg(f['eta_err_p90_deg']):>7} "
                 f"{pct(f['false_positive_rate']):>5} {sign:>7} "
                 f"{'n/a' if f['corner_err_pct'] is None else format(f['corner_err_pct'], '.2f'):>8}"
+                f" {pct(f['focal_err_median']) + '/' + pct(f['focal_err_p90']):>10}"
                 f"   >={100 * t['detection_rate']:.0f}/<={t['eta_err_median_deg']:g}/"
                 f"<={t['eta_err_p90_deg']:g}" + (f"  MISSED {','.join(miss)}" if miss else "  ok"))
+    lines.append("f err: relative error of the focal length each frame rested on, median / "
+                 "p90; detected / detectable by obstacle kind:")
+    for label, *_ in CAMERAS:
+        for split, by_camera in reports.items():
+            f = by_camera[label].figures()
+            kinds = sorted(k.removeprefix("detectable_") for k in f if k.startswith("detectable_"))
+            lines.append(f"  {label:<14} {split:<5} " + ", ".join(
+                f"{k} {f['detected_' + k]}/{f['detectable_' + k]}" for k in kinds))
     lines.append("range to the obstacle's floor contact (camera height given), relative error "
                  "median / p90, measured, too far by > 20 %:")
     for label, *_ in CAMERAS:

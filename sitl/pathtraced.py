@@ -549,9 +549,10 @@ def opencv_distortion(cam: Camera, k1: float) -> tuple[float, float, float, floa
 
 def truth(r3: Room3D, cam: Camera) -> SceneTruth:
     """The exact truth of ``r3`` seen by ``cam``: that of its bounding boxes
-    (:func:`sitl.scene.scene_truth`), image points moved by the lens distortion, and the
-    lens (:func:`opencv_distortion`)."""
+    (:func:`sitl.scene.scene_truth`) with each one's furniture kind, image points moved by
+    the lens distortion, and the lens (:func:`opencv_distortion`)."""
     t = scene_truth(r3.truth_scene(), cam)
+    t = replace(t, obstacles=[replace(o, kind=r3.furniture[o.box].kind) for o in t.obstacles])
     k1 = r3.look.distortion_k1
     if not k1:
         return t

@@ -220,6 +220,7 @@ class ObstacleTruth:
     floor_corners: list[list[float]] = field(default_factory=list)
     """visible bottom corners: [x, y, range_m], range the horizontal distance from the
     camera, metres (the truth of :mod:`companion.vision.ranging`)"""
+    kind: str = "box"  # what the box bounds: box, table, cabinet or sofa (sitl.pathtraced)
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ def test_a_rotated_box_is_found_in_a_path_traced_room():
 def test_furniture_that_is_not_a_box_renders_and_has_truth(kind):
     r3, cam = _room(kind)
     image, truth = render(r3, cam)
-    assert truth.obstacles[0].non_manhattan
+    assert truth.obstacles[0].non_manhattan and truth.obstacles[0].kind == kind
     assert truth.obstacles[0].eta_deg == pytest.approx(35.0, abs=0.01)  # 30° − (−5°), level
     # The furniture darkens the floor and wall where it stands: its parts were drawn.
     empty, _ = render(replace(r3, furniture=()), cam)

@@ -7,7 +7,7 @@ import pytest
 
 from companion.config import Config
 from companion.vision.pipeline import STAGES, Pipeline
-from sitl.evaluate import evaluate_scene
+from sitl.evaluate import EvalReport, SceneResult, evaluate_scene
 from sitl.sample import sample_scene
 from sitl.scene import Box, Camera, Scene, mirror, render, yaw_sweep
 
@@ -166,6 +166,22 @@ def test_evaluating_a_mirrored_frame_scores_it_against_the_mirrored_truth():
     assert flipped.eta_true_deg == pytest.approx(-plain.eta_true_deg) and plain.eta_true_deg < -10
     for r in (plain, flipped):
         assert r.eta_est_deg == pytest.approx(r.eta_true_deg, abs=1.0)
+
+
+def test_the_report_counts_detections_by_kind_and_the_focal_lengths_error():
+    def result(kind, found, focal_est):
+        return SceneResult(index=0, has_obstacle=True, detectable=True, eta_true_deg=20.0,
+                           eta_est_deg=20.5 if found else None, corner_err_pct=None,
+                           latency_ms=1.0, kind=kind, focal_est_px=focal_est,
+                           focal_true_px=400.0)
+
+    report = EvalReport(3, 0, [result("table", True, 400.0), result("table", False, 480.0),
+                               result("box", True, 380.0)])
+    f = report.figures()
+    assert (f["detected_table"], f["detectable_table"]) == (1, 2)
+    assert (f["detected_box"], f["detectable_box"]) == (1, 1)
+    assert f["focal_err_median"] == pytest.approx(0.05)  # of 0, 0.2 and 0.05
+    assert f["focal_err_p90"] == pytest.approx(0.17)
 
 
 def test_a_lower_edge_threshold_finds_a_faint_edge():
