@@ -27,8 +27,13 @@ def test_eta_converges_into_the_deadband_without_overshoot_or_oscillation(eta0, 
     # deadband"), and where it comes to rest depends on the machine's frame timing.
     assert run.overshoot_deg < run.deadband_deg, table
     assert run.sign_changes == 0, table
-    # Table IV: |η| falls frame after frame until it is inside the deadband.
-    before = [abs(f.true_eta_deg) for f in run.frames[: run.converged_at]]
+    # Table IV: |η| falls frame after frame until it is inside the deadband. From there on
+    # the overshoot check above applies: a frame misread while it hovers inside turns it a
+    # little (CI on 883ac76: true η 0.35° → −0.95° after a frame read as +31.5°).
+    inside = next((i for i, f in enumerate(run.frames)
+                   if abs(f.true_eta_deg) <= run.deadband_deg), None)
+    assert inside is not None, table
+    before = [abs(f.true_eta_deg) for f in run.frames[: inside + 1]]
     assert all(b <= a + 0.5 for a, b in zip(before, before[1:], strict=False)), table
     assert abs(run.frames[-1].true_eta_deg) <= run.deadband_deg
     # The autopilot turned the vehicle the way η said, and stopped turning.
