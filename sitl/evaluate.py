@@ -453,50 +453,47 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
     lines = [f"renderer {renderer}: focal length {given}",
              f"{'camera':<14} {'split':<5} {'seed':>5} {'det %':>6} {'η med°':>7} {'η p90°':>7} "
              f"{'FP %':>5} {'sign✗':>7} {'corner %':>8} {'f err %':>10}   targets det/med/p90"]
-    for label, *_ in CAMERAS:
+    # Each row's figures once, for the three blocks below.
+    figures = [(label, split, by_camera[label].figures())
+               for label, *_ in CAMERAS for split, by_camera in reports.items()]
+    for label, split, f in figures:
         t = _split_target(label)
-        for split, by_camera in reports.items():
-            f = by_camera[label].figures()
-            miss = []
-            if f["detection_rate"] is not None and f["detection_rate"] < t["detection_rate"]:
-                miss.append("det")
-            for key, name in (("eta_err_median_deg", "med"), ("eta_err_p90_deg", "p90")):
-                if f[key] is not None and f[key] > t[key]:
-                    miss.append(name)
-            if f["false_positive_rate"] is not None and f["false_positive_rate"] > 0.02:
-                miss.append("FP")
-            sign = f"{f['sign_wrong']}/{f['detected']}"
-            lines.append(
-                f"{label:<14} {split:<5} {f['seed']:>5} {pct(f['detection_rate']):>6} "
-                f"{deg(f['eta_err_median_deg']):>7} {deg(f['eta_err_p90_deg']):>7} "
-                f"{pct(f['false_positive_rate']):>5} {sign:>7} "
-                f"{'n/a' if f['corner_err_pct'] is None else format(f['corner_err_pct'], '.2f'):>8}"
-                f" {pct(f['focal_err_median']) + '/' + pct(f['focal_err_p90']):>10}"
-                f"   >={100 * t['detection_rate']:.0f}/<={t['eta_err_median_deg']:g}/"
-                f"<={t['eta_err_p90_deg']:g}" + (f"  MISSED {','.join(miss)}" if miss else "  ok"))
+        miss = []
+        if f["detection_rate"] is not None and f["detection_rate"] < t["detection_rate"]:
+            miss.append("det")
+        for key, name in (("eta_err_median_deg", "med"), ("eta_err_p90_deg", "p90")):
+            if f[key] is not None and f[key] > t[key]:
+                miss.append(name)
+        if f["false_positive_rate"] is not None and f["false_positive_rate"] > 0.02:
+            miss.append("FP")
+        sign = f"{f['sign_wrong']}/{f['detected']}"
+        lines.append(
+            f"{label:<14} {split:<5} {f['seed']:>5} {pct(f['detection_rate']):>6} "
+            f"{deg(f['eta_err_median_deg']):>7} {deg(f['eta_err_p90_deg']):>7} "
+            f"{pct(f['false_positive_rate']):>5} {sign:>7} "
+            f"{'n/a' if f['corner_err_pct'] is None else format(f['corner_err_pct'], '.2f'):>8}"
+            f" {pct(f['focal_err_median']) + '/' + pct(f['focal_err_p90']):>10}"
+            f"   >={100 * t['detection_rate']:.0f}/<={t['eta_err_median_deg']:g}/"
+            f"<={t['eta_err_p90_deg']:g}" + (f"  MISSED {','.join(miss)}" if miss else "  ok"))
     lines.append("f err: relative error of the focal length each frame rested on, median / "
                  "p90; detected / detectable by obstacle kind:")
-    for label, *_ in CAMERAS:
-        for split, by_camera in reports.items():
-            f = by_camera[label].figures()
-            kinds = sorted(k.removeprefix("detectable_") for k in f if k.startswith("detectable_"))
-            lines.append(f"  {label:<14} {split:<5} " + ", ".join(
-                f"{k} {f['detected_' + k]}/{f['detectable_' + k]}" for k in kinds))
+    for label, split, f in figures:
+        kinds = sorted(k.removeprefix("detectable_") for k in f if k.startswith("detectable_"))
+        lines.append(f"  {label:<14} {split:<5} " + ", ".join(
+            f"{k} {f['detected_' + k]}/{f['detectable_' + k]}" for k in kinds))
     lines.append("range to the obstacle's floor contact (camera height given), relative error "
                  "median / p90, measured, too far by > 20 %:")
-    for label, *_ in CAMERAS:
-        for split, by_camera in reports.items():
-            f = by_camera[label].figures()
-            parts = []
-            for lo, hi in RANGE_BANDS:
-                key = f"range_{lo:g}_{hi:g}m"
-                if f[f"{key}_n"]:
-                    parts.append(f"{lo:g}–{hi:g} m {100 * f[key + '_rel_err_median']:.1f} / "
-                                 f"{100 * f[key + '_rel_err_p90']:.1f} %, n {f[key + '_n']}, "
-                                 f"too far {f[key + '_too_far']}")
-                else:
-                    parts.append(f"{lo:g}–{hi:g} m n 0")
-            lines.append(f"  {label:<14} {split:<5} " + "; ".join(parts))
+    for label, split, f in figures:
+        parts = []
+        for lo, hi in RANGE_BANDS:
+            key = f"range_{lo:g}_{hi:g}m"
+            if f[f"{key}_n"]:
+                parts.append(f"{lo:g}–{hi:g} m {100 * f[key + '_rel_err_median']:.1f} / "
+                             f"{100 * f[key + '_rel_err_p90']:.1f} %, n {f[key + '_n']}, "
+                             f"too far {f[key + '_too_far']}")
+            else:
+                parts.append(f"{lo:g}–{hi:g} m n 0")
+        lines.append(f"  {label:<14} {split:<5} " + "; ".join(parts))
     return lines
 
 
