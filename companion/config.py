@@ -68,6 +68,10 @@ class VisionConfig:
     max_segments: int = field(default=300, metadata=_range(10, 5000))
     edge_threshold: float = field(default=20.0, metadata=_range(1.0, 255.0))
     validate_segments: bool = False
+    min_step_z: float = field(default=6.0, metadata=_range(0.0, 1000.0))
+    """a segment that points at none of the room's VPs (a rotated obstacle's edge, or
+    noise) is kept only if its grey step across stands this many standard errors above
+    the frame's noise (vision/lines.py ``edge_step_z``); 0 keeps every one"""
     refine_segments: bool = False
     """each segment moved onto its edge's gradient peak, sub-pixel (vision/lines.py);
     off: on real photographs it did not help the layout (docs/evaluation.md)"""

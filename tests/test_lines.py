@@ -1,5 +1,5 @@
-"""Segment detection (a-contrario validation) and growing toward junctions
-(companion.vision.lines)."""
+"""Segment detection (a-contrario validation, the step test against the frame's noise) and
+growing toward junctions (companion.vision.lines)."""
 
 from dataclasses import replace
 
@@ -8,8 +8,16 @@ import numpy as np
 import pytest
 
 from companion.config import Config
-from companion.vision.lines import extend_segments, make_detector, refine_segments
+from companion.vision.lines import (
+    QUANTISATION_SIGMA,
+    edge_step_z,
+    extend_segments,
+    make_detector,
+    noise_sigma,
+    refine_segments,
+)
 from companion.vision.pipeline import Pipeline
+from companion.vision.vanishing import NONE, V1
 
 
 def _rectangle(noise=3.0, seed=0):
@@ -51,6 +59,66 @@ def test_corners_are_built_from_validated_segments_and_the_layout_from_all():
     est = pipeline(frame)
     assert len(every) >= 30  # the layout's input: every segment
     assert 1 <= len(est.segments) <= len(every) / 5  # the corners': validated ones
+
+
+@pytest.mark.parametrize("sigma", [2.0, 5.0, 10.0])
+def test_the_noise_estimate_measures_the_noise_not_the_shading(sigma):
+    rng = np.random.default_rng(int(sigma))
+    shading = np.linspace(40.0, 200.0, 320)[None, :] + np.linspace(0.0, 30.0, 240)[:, None]
+    frame = np.clip(shading + rng.normal(0.0, sigma, (240, 320)), 0, 255).astype(np.uint8)
+    assert noise_sigma(frame) == pytest.approx(sigma, rel=0.1)
+
+
+def test_a_plain_frame_has_the_noise_of_rounding_alone():
+    assert noise_sigma(np.full((120, 160), 77, np.uint8)) == QUANTISATION_SIGMA
+
+
+def _step(contrast, noise, seed=0):
+    # A horizontal step edge at y = 119.5 of `contrast` grey levels under white noise.
+    rng = np.random.default_rng(seed)
+    frame = np.full((240, 320), 100.0)
+    frame[120:] += contrast
+    return np.clip(frame + rng.normal(0.0, noise, frame.shape), 0, 255).astype(np.uint8)
+
+
+def test_the_step_test_weighs_contrast_against_length():
+    faint, strong = _step(6.0, 4.0), _step(40.0, 4.0)
+    long_edge, short_edge = [[20.0, 119.5, 300.0, 119.5]], [[150.0, 119.5, 162.0, 119.5]]
+    off_edge = [[20.0, 60.5, 300.0, 60.5]]
+    z = {name: edge_step_z(frame, np.array(seg), noise_sigma(frame))[0]
+         for name, frame, seg in [("faint long", faint, long_edge),
+                                  ("faint short", faint, short_edge),
+                                  ("strong short", strong, short_edge),
+                                  ("plain wall", strong, off_edge)]}
+    # 64 stations average the noise down; 6 do not (the median's standard error is
+    # 1.25 σ / √m: a 6-level step is 9.6 of them over 64 stations, 2.9 over 6).
+    assert z["faint long"] > 6.0 > z["faint short"]
+    assert z["strong short"] > 6.0 > z["plain wall"]
+
+
+def test_the_step_test_keeps_the_edge_and_drops_chance_segments():
+    frame = _noisy_step()
+    segments, _ = make_detector("edlines", 8.0, 20.0)(frame)
+    z = edge_step_z(frame, segments, noise_sigma(frame))
+    on_edge = (np.abs(segments[:, 0] - 159.5) < 2) & (np.abs(segments[:, 2] - 159.5) < 2)
+    assert on_edge.any() and (z[on_edge] > 30).all()
+    # Dozens of chance segments, fitted to chains of noise pixels; few stand out of it.
+    chance = z[~on_edge]
+    assert len(chance) >= 30
+    assert np.count_nonzero(chance >= Config().vision.min_step_z) <= 0.1 * len(chance)
+
+
+def test_only_unassigned_segments_are_put_to_the_step_test():
+    frame = _rectangle(noise=3.0)
+    segments = np.array([[90.0, 59.5, 230.0, 59.5],     # the rectangle's top edge
+                         [90.0, 100.5, 230.0, 100.5],   # inside it: no edge
+                         [90.0, 30.5, 230.0, 30.5]])    # above it: no edge, but V1's
+    labels = np.array([NONE, NONE, V1])
+    kept, kept_labels = Pipeline(Config())._drop_noise(frame, segments, labels)
+    assert np.array_equal(kept, segments[[0, 2]]) and list(kept_labels) == [NONE, V1]
+    cfg = Config()
+    off = Pipeline(replace(cfg, vision=replace(cfg.vision, min_step_z=0.0)))
+    assert np.array_equal(off._drop_noise(frame, segments, labels)[0], segments)
 
 
 def test_a_segment_short_of_both_corners_grows_to_them():

@@ -32,16 +32,26 @@ from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
 from companion.vision.lens import half_diagonal, radial_k, undistort_maps
 from companion.vision.lines import (
+    edge_step_z,
     extend_segments,
     filter_segments,
     make_detector,
+    noise_sigma,
     refine_segments,
     to_gray,
 )
 from companion.vision.obstacles import Obstacle, find_obstacles
 from companion.vision.ranging import FloorContact, floor_contacts, path_distance
 from companion.vision.tracking import Track, update_track
-from companion.vision.vanishing import V1, V2, V3, LayoutVPs, assign_segments, detect_layout_vps
+from companion.vision.vanishing import (
+    NONE,
+    V1,
+    V2,
+    V3,
+    LayoutVPs,
+    assign_segments,
+    detect_layout_vps,
+)
 
 __all__ = ["Estimate", "Pipeline", "RunningFocal", "RunningLens", "STAGES"]
 
@@ -446,6 +456,25 @@ class Pipeline:
             every = refined
         return every, chosen
 
+    def _drop_noise(self, gray: np.ndarray, segments: np.ndarray,
+                    labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The segments and labels without the unassigned segments that are not clearly
+        edges (``vision.min_step_z``).
+
+        Sensor noise on a plain wall makes short chance segments at every angle, and one
+        of them at a vertical edge is the corner of an obstacle that is not there. A
+        segment the room's VPs claim needs no such test: chance does not line it up with
+        a VP, and a faint one (a box's edge between two faces lit alike) still counts.
+        """
+        min_z = self.config.vision.min_step_z
+        unassigned = np.flatnonzero(labels == NONE)
+        if min_z <= 0 or len(unassigned) == 0:
+            return segments, labels
+        z = edge_step_z(gray, segments[unassigned], noise_sigma(gray))
+        keep = np.ones(len(segments), bool)
+        keep[unassigned[z < min_z]] = False
+        return segments[keep], labels[keep]
+
     def layout(self, frame: np.ndarray) -> tuple[LayoutVPs, str]:
         """Stages 1–2 alone, frame → layout VPs and the focal length's source (given,
         estimated, assumed): what a vanishing-point detector returns."""
@@ -487,6 +516,7 @@ class Pipeline:
         # The layout rests on every segment, corners and obstacles on the validated ones.
         layout, focal_source = self._layout(all_segments, w, h)
         labels, _ = assign_segments(segments, layout.vps, vc.vanishing)
+        segments, labels = self._drop_noise(gray, segments, labels)
         t2 = time.perf_counter()
         ms["vps"] = (t2 - t1) * 1e3
 
