@@ -190,7 +190,8 @@ def noise_sigma(gray: np.ndarray, positions: int = 10_000) -> float:
     slight blur (demosaicing, a lens) does not correlate them, and it is read at about
     ``positions`` places (every other column of evenly spaced rows): enough for one
     number to a few per cent, at the same cost at any frame size. Texture and edges
-    answer too, so on a textured frame the estimate is high, never low.
+    answer too, so on a textured frame the estimate errs high (the test it serves then
+    errs towards keeping segments).
 
     Input: ``gray`` H×W uint8. Output: σ >= :data:`QUANTISATION_SIGMA`.
     """

@@ -513,7 +513,8 @@ class Pipeline:
         t1 = time.perf_counter()
         ms["lines"] = (t1 - t0) * 1e3
 
-        # The layout rests on every segment, corners and obstacles on the validated ones.
+        # The layout rests on every segment, corners and obstacles on the validated ones,
+        # less the unassigned ones that do not stand out of the frame's noise.
         layout, focal_source = self._layout(all_segments, w, h)
         labels, _ = assign_segments(segments, layout.vps, vc.vanishing)
         segments, labels = self._drop_noise(gray, segments, labels)
