@@ -26,18 +26,31 @@ cdef inline double bilinear(const unsigned char[:, ::1] img, double x, double y)
                 + (img[y1, x0] * (1.0 - fx) + img[y1, x1] * fx) * fy)
 
 
-cdef inline double median9(double* v) noexcept nogil:
-    """The median of nine values (sorted in place)."""
-    cdef int a, b
-    cdef double tmp
-    for a in range(1, 9):
-        b = a
-        while b > 0 and v[b] < v[b - 1]:
-            tmp = v[b]
-            v[b] = v[b - 1]
-            v[b - 1] = tmp
-            b -= 1
-    return v[4]
+cdef double select_kth(double* v, Py_ssize_t n, Py_ssize_t k) noexcept nogil:
+    """The k-th smallest of ``v[0:n]`` (Hoare's selection; ``v`` reordered in place)."""
+    cdef Py_ssize_t lo = 0, hi = n - 1, a, b
+    cdef double pivot, tmp
+    while lo < hi:
+        pivot = v[(lo + hi) // 2]
+        a, b = lo, hi
+        while a <= b:
+            while v[a] < pivot:
+                a += 1
+            while v[b] > pivot:
+                b -= 1
+            if a <= b:
+                tmp = v[a]
+                v[a] = v[b]
+                v[b] = tmp
+                a += 1
+                b -= 1
+        if k <= b:
+            hi = b
+        elif k >= a:
+            lo = a
+        else:
+            return v[k]
+    return v[k]
 
 
 def grow_segments(gray, segments, ends, double max_px, double step_px, double offset_px,
@@ -83,9 +96,9 @@ def grow_segments(gray, segments, ends, double max_px, double step_px, double of
             side_a[k] = bilinear(img, <float>(x + nx), <float>(y + ny))
             side_b[k] = bilinear(img, <float>(x - nx), <float>(y - ny))
             inside[k] = side_a[k] - side_b[k]
-        step = median9(inside)
-        side_a_median = median9(side_a)
-        side_b_median = median9(side_b)
+        step = select_kth(inside, 9, 4)
+        side_a_median = select_kth(side_a, 9, 4)
+        side_b_median = select_kth(side_b, 9, 4)
         sign = (step > 0) - (step < 0)
         need = <float>keep_frac * <float>abs(step)
         if need < min_contrast:
@@ -294,33 +307,6 @@ cdef enum:
     MAX_STATIONS = 64  # most stations of the step test along one segment
 
 
-cdef double select_kth(double* v, Py_ssize_t n, Py_ssize_t k) noexcept nogil:
-    """The k-th smallest of ``v[0:n]`` (Hoare's selection; ``v`` reordered in place)."""
-    cdef Py_ssize_t lo = 0, hi = n - 1, a, b
-    cdef double pivot, tmp
-    while lo < hi:
-        pivot = v[(lo + hi) // 2]
-        a, b = lo, hi
-        while a <= b:
-            while v[a] < pivot:
-                a += 1
-            while v[b] > pivot:
-                b -= 1
-            if a <= b:
-                tmp = v[a]
-                v[a] = v[b]
-                v[b] = tmp
-                a += 1
-                b -= 1
-        if k <= b:
-            hi = b
-        elif k >= a:
-            lo = a
-        else:
-            return v[k]
-    return v[k]
-
-
 def noise_sigma(gray, Py_ssize_t row_step):
     """Immerkær's estimate (mask 1 −2 1 / −2 4 −2 / 1 −2 1, spacing 2 px) of the noise's
     standard deviation, on every ``row_step``-th row and every other column. Grey levels."""
@@ -366,8 +352,10 @@ def step_z(gray, segments, double sigma, double step_px):
             x = s[i, 0] + dx * (k + 0.5) / m
             y = s[i, 1] + dy * (k + 0.5) / m
             # the normal (-uy, ux) points to the segment's left
-            diff[k] = 0.5 * (bilinear(img, x - uy, y + ux) + bilinear(img, x - 2 * uy, y + 2 * ux)
-                             - bilinear(img, x + uy, y - ux) - bilinear(img, x + 2 * uy, y - 2 * ux))
+            diff[k] = 0.5 * (bilinear(img, x - uy, y + ux)
+                             + bilinear(img, x - 2 * uy, y + 2 * ux)
+                             - bilinear(img, x + uy, y - ux)
+                             - bilinear(img, x + 2 * uy, y - 2 * ux))
         med = select_kth(diff, m, m // 2)
         out[i] = (med if med >= 0 else -med) * sqrt(m) / (1.2533 * sigma)
     return out_arr
