@@ -10,7 +10,9 @@ from companion.vision.pipeline import Pipeline
 from companion.vision.ranging import (
     FloorContact,
     down_direction,
+    floor_contacts,
     floor_point,
+    floor_points,
     obstacle_contact,
     path_distance,
 )
@@ -39,6 +41,52 @@ def test_a_pitched_camera_uses_v3_not_the_image_rows():
     down = down_direction(v3, F, CENTRE)
     c = floor_point(CENTRE, down, F, CENTRE, 1.0)  # the optical axis
     assert c.range_m == pytest.approx(1.0 / math.tan(pitch))
+
+
+def _tilted_camera(pitch_deg, roll_deg):
+    """Rotation from a levelled frame (x right, y down, z forward) into a camera pitched
+    down by ``pitch_deg`` and then rolled by ``roll_deg``, and that camera's V3."""
+    p, r = math.radians(pitch_deg), math.radians(roll_deg)
+    rx = np.array([[1, 0, 0], [0, math.cos(p), math.sin(p)], [0, -math.sin(p), math.cos(p)]])
+    rz = np.array([[math.cos(r), -math.sin(r), 0], [math.sin(r), math.cos(r), 0], [0, 0, 1]])
+    rot = rz @ rx
+    d = rot @ np.array([0.0, 1.0, 0.0])
+    return rot, np.array([F * d[0] + CENTRE[0] * d[2], F * d[1] + CENTRE[1] * d[2], d[2]])
+
+
+def _pixel(rot, point):
+    pc = rot @ point
+    return CENTRE + F * pc[:2] / pc[2]
+
+
+@pytest.mark.parametrize("pitch, roll", [(0.0, 0.0), (6.0, 0.0), (-4.0, 5.0), (3.0, -8.0)])
+def test_floor_points_of_a_tilted_camera_give_range_and_bearing_on_the_floor(pitch, roll):
+    rot, v3 = _tilted_camera(pitch, roll)
+    h = 1.1
+    ahead_right = [(2.0, 0.0), (3.0, -1.0), (1.5, 0.7), (6.0, 2.5)]
+    pixels = np.array([_pixel(rot, np.array([y, h, x])) for x, y in ahead_right]
+                      + [_pixel(rot, np.array([0.0, -0.5, 4.0]))])  # above the horizon
+    got = floor_points(pixels, down_direction(v3, F, CENTRE), F, CENTRE, h)
+    assert got[-1] is None
+    for (x, y), c in zip(ahead_right, got[:-1], strict=True):
+        assert c.range_m == pytest.approx(math.hypot(x, y), rel=1e-9)
+        assert c.bearing_deg == pytest.approx(math.degrees(math.atan2(y, x)), abs=1e-9)
+        assert c.ahead_right_m == pytest.approx((x, y), abs=1e-9)
+
+
+def test_floor_contacts_are_the_feet_of_every_vertical_edge_sorted_by_bearing():
+    rot, v3 = _tilted_camera(4.0, -3.0)
+    h = 1.0
+    # A box face on the floor 2.5–3.5 m ahead, 0.8 m tall, its two vertical edges and a
+    # top corner with no bottom partner in view.
+    feet = [(3.5, 0.6), (2.5, -0.4)]
+    corners = []
+    for x, y in feet:
+        corners += [_pixel(rot, np.array([y, h, x])), _pixel(rot, np.array([y, h - 0.8, x]))]
+    corners.append(_pixel(rot, np.array([1.5, h - 0.8, 4.0])))
+    got = floor_contacts(np.array(corners), v3, F, CENTRE, h)
+    assert [c.ahead_right_m for c in got] == [pytest.approx(f, abs=1e-9) for f in
+                                              sorted(feet, key=lambda f: math.atan2(f[1], f[0]))]
 
 
 def test_a_corner_with_no_partner_below_or_above_gives_no_range():

@@ -53,15 +53,11 @@ def direction_of(point: np.ndarray, focal_px: float, centre: np.ndarray) -> np.n
     axes are x right, y down, z forward. Works for points at infinity (``w = 0``).
     """
     p = np.asarray(point, dtype=float)
-    d = np.stack(
-        [
-            p[..., 0] - centre[0] * p[..., 2],
-            p[..., 1] - centre[1] * p[..., 2],
-            focal_px * p[..., 2],
-        ],
-        axis=-1,
-    )
-    n = np.linalg.norm(d, axis=-1, keepdims=True)
+    d = np.empty(p.shape[:-1] + (3,))
+    d[..., 0] = p[..., 0] - centre[0] * p[..., 2]
+    d[..., 1] = p[..., 1] - centre[1] * p[..., 2]
+    d[..., 2] = focal_px * p[..., 2]
+    n = np.sqrt((d * d).sum(axis=-1, keepdims=True))
     return np.divide(d, n, out=np.zeros_like(d), where=n > 0)
 
 

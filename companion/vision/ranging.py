@@ -23,8 +23,8 @@ import numpy as np
 
 from companion.vision.geometry import direction_of
 
-__all__ = ["FloorContact", "floor_point", "floor_contacts", "obstacle_contact", "down_direction",
-           "path_distance"]
+__all__ = ["FloorContact", "floor_point", "floor_points", "floor_contacts", "obstacle_contact",
+           "down_direction", "path_distance"]
 
 VERTICAL_EDGE_TOL_DEG = 2.0
 """two corners are on one vertical edge when their line points at V3 within this"""
@@ -64,19 +64,39 @@ def floor_point(pixel, down: np.ndarray, focal_px: float, centre: np.ndarray,
     Inputs: ``down`` from :func:`down_direction`; ``focal_px``, ``centre`` the camera;
     ``camera_height_m`` above the floor.
     """
-    x, y = float(pixel[0]), float(pixel[1])
-    r = np.array([(x - centre[0]) / focal_px, (y - centre[1]) / focal_px, 1.0])
-    r /= np.linalg.norm(r)
-    s = float(r @ down)  # sine of the ray's depression below the horizon
-    if s < math.sin(math.radians(MIN_DEPRESSION_DEG)):
-        return None
-    p = camera_height_m * r / s
-    horizontal = p - (p @ down) * down
-    fwd = np.array([0.0, 0.0, 1.0]) - down[2] * down
-    fwd /= np.linalg.norm(fwd)
-    right = np.cross(down, fwd)  # camera x, levelled: down × forward points right
-    bearing = math.degrees(math.atan2(float(horizontal @ right), float(horizontal @ fwd)))
-    return FloorContact(float(np.linalg.norm(horizontal)), bearing, (x, y))
+    return floor_points(np.asarray(pixel, dtype=float).reshape(1, 2), down, focal_px, centre,
+                        camera_height_m)[0]
+
+
+def floor_points(pixels: np.ndarray, down: np.ndarray, focal_px: float, centre: np.ndarray,
+                 camera_height_m: float) -> list[FloorContact | None]:
+    """:func:`floor_point` of each row of ``pixels`` (K×2). Scalar arithmetic: K is a
+    handful of corners, for which numpy's per-call cost is most of the time."""
+    dx, dy, dz = (float(t) for t in down)
+    cx, cy = float(centre[0]), float(centre[1])
+    # The camera's forward and right directions levelled onto the floor: forward without
+    # its down part; right = down × forward.
+    fx, fy, fz = -dz * dx, -dz * dy, 1.0 - dz * dz
+    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+    fx, fy, fz = fx / fn, fy / fn, fz / fn
+    rx, ry, rz = dy * fz - dz * fy, dz * fx - dx * fz, dx * fy - dy * fx
+    min_s = math.sin(math.radians(MIN_DEPRESSION_DEG))
+    out: list[FloorContact | None] = []
+    for x, y in np.asarray(pixels, dtype=float).reshape(-1, 2).tolist():
+        ux, uy = (x - cx) / focal_px, (y - cy) / focal_px
+        un = math.sqrt(ux * ux + uy * uy + 1.0)
+        s = (ux * dx + uy * dy + dz) / un  # sine of the ray's depression below the horizon
+        if s < min_s:
+            out.append(None)
+            continue
+        k = camera_height_m / (s * un)  # the ray (ux, uy, 1) scaled to meet the floor
+        px, py, pz = k * ux, k * uy, k
+        along = px * dx + py * dy + pz * dz
+        hx, hy, hz = px - along * dx, py - along * dy, pz - along * dz
+        bearing = math.degrees(math.atan2(hx * rx + hy * ry + hz * rz,
+                                          hx * fx + hy * fy + hz * fz))
+        out.append(FloorContact(math.sqrt(hx * hx + hy * hy + hz * hz), bearing, (x, y)))
+    return out
 
 
 def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
@@ -84,25 +104,26 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
     """Every floor contact of an obstacle whose corner projections are ``corners_px``
     (K×2): the lower corner of each pair of its corners on one line through V3, seen on
     the floor, sorted by bearing. Empty when no two corners share a vertical edge."""
-    pts = np.atleast_2d(np.asarray(corners_px, dtype=float))
+    pts = np.atleast_2d(np.asarray(corners_px, dtype=float)).reshape(-1, 2)
+    if len(pts) < 2:
+        return []
     down = down_direction(v3, focal_px, centre)
     v = np.asarray(v3, dtype=float)
     tol = math.sin(math.radians(VERTICAL_EDGE_TOL_DEG))
-    rays = [direction_of(np.array([x, y, 1.0]), focal_px, centre).reshape(3) for x, y in pts]
-    lower = set()
-    for i in range(len(pts)):
-        for j in range(len(pts)):
-            edge = pts[i] - pts[j]
-            n = float(np.hypot(*edge))
-            if i == j or n < 1.0:
-                continue
-            to_v3 = v[:2] - v[2] * pts[j]  # toward V3 from corner j (V3 may be at infinity)
-            m = float(np.hypot(*to_v3))
-            if m < 1e-12 or abs(edge[0] * to_v3[1] - edge[1] * to_v3[0]) / (n * m) > tol:
-                continue  # not on one vertical line
-            if float(rays[i] @ down) > float(rays[j] @ down):
-                lower.add(i)  # i lies farther down than j: the foot of their edge
-    out = [floor_point(pts[i], down, focal_px, centre, camera_height_m) for i in sorted(lower)]
+    # All pairs at once (the service ranges every frame): edge[i, j] = pts[i] − pts[j],
+    # and to_v3[j] points from corner j toward V3 (which may be at infinity).
+    edge = pts[:, None, :] - pts[None, :, :]
+    n = np.hypot(edge[..., 0], edge[..., 1])
+    to_v3 = v[:2] - v[2] * pts
+    m = np.hypot(to_v3[:, 0], to_v3[:, 1])
+    cross = np.abs(edge[..., 0] * to_v3[:, 1] - edge[..., 1] * to_v3[:, 0])
+    on_one_vertical = (n >= 1.0) & (m >= 1e-12) & (cross <= tol * n * m)
+    u = (pts - centre[:2]) / focal_px  # each corner's ray (u, 1): sine of its depression
+    depression = (u @ down[:2] + down[2]) / np.sqrt(1.0 + (u * u).sum(axis=1))
+    # i lies farther down than a corner j on its vertical line: the foot of their edge.
+    lower = np.flatnonzero((on_one_vertical & (depression[:, None] > depression[None, :]))
+                           .any(axis=1))
+    out = floor_points(pts[lower], down, focal_px, centre, camera_height_m)
     return sorted((c for c in out if c is not None), key=lambda c: c.bearing_deg)
 
 
