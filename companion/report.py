@@ -39,6 +39,7 @@ LOG_KEYS = (
 # BGR colours: V1 red, V2 green, V3 blue, obstacle legs yellow, unassigned grey.
 _LABEL_COLOURS = {V1: (40, 40, 230), V2: (40, 200, 40), V3: (230, 120, 30), NONE: (150, 150, 150)}
 _OBSTACLE = (0, 220, 255)
+_NOISE = (90, 90, 90)  # dropped as noise: darker than the unassigned grey
 
 
 def _round(x: float | None, nd: int = 3) -> float | None:
@@ -183,9 +184,10 @@ def _label(img: np.ndarray, text: str, org: tuple[int, int], colour, scale: floa
 
 LEGEND = (("V1", _LABEL_COLOURS[V1]), ("V2", _LABEL_COLOURS[V2]),
           ("V3 vertical", _LABEL_COLOURS[V3]), ("obstacle: legs, corners, O1 O2", _OBSTACLE),
-          ("unassigned", _LABEL_COLOURS[NONE]), ("η arrow", (0, 0, 255)))
+          ("unassigned", _LABEL_COLOURS[NONE]), ("η arrow", (0, 0, 255)), ("noise", _NOISE))
 """What each colour of :func:`annotate` is: segments pointing at V1, V2, V3; the obstacle's
-legs, corner points and OVPs; segments of no VP; the arrow turned by η."""
+legs, corner points and OVPs; segments of no VP; the arrow turned by η; unassigned segments
+dropped as noise (``vision.min_step_z``)."""
 
 
 def annotate(frame: np.ndarray, est: Estimate, cmd: TurnCommand | None = None) -> np.ndarray:
@@ -196,6 +198,9 @@ def annotate(frame: np.ndarray, est: Estimate, cmd: TurnCommand | None = None) -
     legs: set[int] = set()
     for k in range(len(est.obstacle_corners)):
         legs.update((int(est.obstacle_corners.s[k]), int(est.obstacle_corners.n[k])))
+    for seg in est.noise_segments:
+        cv2.line(img, _clip_point(seg[:2], w, h), _clip_point(seg[2:], w, h), _NOISE, 1,
+                 cv2.LINE_AA)
     for i, seg in enumerate(est.segments):
         colour = (
             _OBSTACLE if i in legs else _LABEL_COLOURS.get(int(est.labels[i]), _LABEL_COLOURS[NONE])

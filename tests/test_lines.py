@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from companion.config import Config
+from companion.report import LEGEND, annotate
 from companion.vision.lines import (
     QUANTISATION_SIGMA,
     edge_step_z,
@@ -114,11 +115,28 @@ def test_only_unassigned_segments_are_put_to_the_step_test():
                          [90.0, 100.5, 230.0, 100.5],   # inside it: no edge
                          [90.0, 30.5, 230.0, 30.5]])    # above it: no edge, but V1's
     labels = np.array([NONE, NONE, V1])
-    kept, kept_labels = Pipeline(Config())._drop_noise(frame, segments, labels)
+    kept, kept_labels, dropped = Pipeline(Config())._drop_noise(frame, segments, labels)
     assert np.array_equal(kept, segments[[0, 2]]) and list(kept_labels) == [NONE, V1]
+    assert np.array_equal(dropped, segments[[1]])  # for the annotated video to draw
     cfg = Config()
     off = Pipeline(replace(cfg, vision=replace(cfg.vision, min_step_z=0.0)))
-    assert np.array_equal(off._drop_noise(frame, segments, labels)[0], segments)
+    kept, _, dropped = off._drop_noise(frame, segments, labels)
+    assert np.array_equal(kept, segments) and len(dropped) == 0
+
+
+def test_the_annotated_frame_draws_the_segments_dropped_as_noise():
+    frame = cv2.cvtColor(_noisy_step(), cv2.COLOR_GRAY2BGR)
+    est = Pipeline(Config())(frame)
+    assert len(est.noise_segments) >= 10  # the chance segments on the noise
+    blank = np.zeros_like(frame)
+    with_noise = annotate(blank, est)
+    without = annotate(blank, replace(est, noise_segments=est.noise_segments[:0]))
+    drawn = np.any(with_noise != without, axis=2)
+    assert drawn.sum() > 100
+    px = with_noise[drawn].astype(int)  # dark grey, anti-aliased, save where others cross
+    grey = (px.max(axis=1) - px.min(axis=1) <= 2) & (px.max(axis=1) <= 90)
+    assert grey.mean() > 0.9
+    assert "noise" in [name for name, _ in LEGEND]
 
 
 def test_a_segment_short_of_both_corners_grows_to_them():

@@ -207,6 +207,8 @@ class Estimate:
     :mod:`~companion.vision.ranging`), empty without the camera height
     (``camera_height_m``) or a vertical edge whose foot is seen; ``contact``, ``range_m``:
     the primary obstacle's nearest.
+    ``noise_segments`` K×4: unassigned segments dropped before the corners for not
+    standing out of the frame's noise (``vision.min_step_z``); drawn, never used.
     """
 
     eta_deg: float | None
@@ -227,6 +229,7 @@ class Estimate:
     eta_tracked_deg: float | None = None
     obstacle_contacts: tuple[tuple[FloorContact, ...], ...] = ()
     camera_height_m: float | None = None
+    noise_segments: np.ndarray = field(default_factory=lambda: np.empty((0, 4)))
 
     @property
     def contact(self) -> FloorContact | None:
@@ -456,10 +459,10 @@ class Pipeline:
             every = refined
         return every, chosen
 
-    def _drop_noise(self, gray: np.ndarray, segments: np.ndarray,
-                    labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _drop_noise(self, gray: np.ndarray, segments: np.ndarray, labels: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The segments and labels without the unassigned segments that are not clearly
-        edges (``vision.min_step_z``).
+        edges (``vision.min_step_z``), and those dropped (K×4).
 
         Sensor noise on a plain wall makes short chance segments at every angle, and one
         of them at a vertical edge is the corner of an obstacle that is not there. A
@@ -469,11 +472,11 @@ class Pipeline:
         min_z = self.config.vision.min_step_z
         unassigned = np.flatnonzero(labels == NONE)
         if min_z <= 0 or len(unassigned) == 0:
-            return segments, labels
+            return segments, labels, segments[:0]
         z = edge_step_z(gray, segments[unassigned], noise_sigma(gray))
         keep = np.ones(len(segments), bool)
         keep[unassigned[z < min_z]] = False
-        return segments[keep], labels[keep]
+        return segments[keep], labels[keep], segments[~keep]
 
     def layout(self, frame: np.ndarray) -> tuple[LayoutVPs, str]:
         """Stages 1–2 alone, frame → layout VPs and the focal length's source (given,
@@ -517,7 +520,7 @@ class Pipeline:
         # less the unassigned ones that do not stand out of the frame's noise.
         layout, focal_source = self._layout(all_segments, w, h)
         labels, _ = assign_segments(segments, layout.vps, vc.vanishing)
-        segments, labels = self._drop_noise(gray, segments, labels)
+        segments, labels, noise_segments = self._drop_noise(gray, segments, labels)
         t2 = time.perf_counter()
         ms["vps"] = (t2 - t1) * 1e3
 
@@ -586,4 +589,5 @@ class Pipeline:
             eta_tracked_deg=eta_tracked,
             obstacle_contacts=contacts,
             camera_height_m=height or None,
+            noise_segments=noise_segments,
         )
