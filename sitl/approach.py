@@ -42,7 +42,9 @@ pipeline is not told of). The geometry, and so the collisions and the oracle, ar
 Time. Against the mock autopilot (the default) the vehicle moves in lock-step with the
 camera: each frame, the mock flies one camera period of simulated time and the companion
 runs on that clock, so a frame that takes 0.12 s to draw (3 s path-traced) costs no
-flight time, as with a real camera. Against another autopilot (``--autopilot URL``, e.g.
+flight time, as with a real camera. The clock also waits while offboard engages (MAVSDK's
+real-time exchange with the autopilot), so a run flies the same way every time. Against
+another autopilot (``--autopilot URL``, e.g.
 PX4 SITL) everything runs in real time and the harness assumes nothing of it: it maps the
 autopilot's local frame (origin, heading) onto the room where the vehicle hovers when the
 run begins, and renders at the altitude the vehicle actually reports.
@@ -454,18 +456,28 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                                                                   image)
             eta, cmd, history = decide_frame(seen, tracked, cfg.policy, history, understood,
                                              range_m)
-            t_frame = controller.clock()
+            # Exposed a moment before it is decided on; in lock-step the offset also keeps
+            # a frame's age off the supervisor's thresholds (whole numbers of camera
+            # periods), where the clock's rounding would decide the comparison.
+            t_frame = controller.clock() - EXPOSURE_LEAD_S
             t_wall = time.monotonic()
             result.decision_ms.append((time.perf_counter() - t0) * 1e3)
+            ticks = controller.ticks_done
             controller.submit(cmd, eta, t_s=t_frame, range_m=range_m, path_m=path_m)
             result.decisions.append((round(result.time_s, 2), round(heading, 2),
                                      None if eta is None else round(eta, 2), cmd.action,
                                      _round(range_m), _round(path_m)))
+            engaging = mock is not None and controller.state.name != "active"
+            if engaging:
+                # Engaging offboard is MAVSDK's and the autopilot's real-time exchange.
+                # The simulated clock waits for it, so that how long it takes in real
+                # time does not decide at which frame the vehicle starts to act: a run
+                # flies the same way every time.
+                _wait_engaged(controller, ticks, session_over)
             if controller.state.name == "active":
-                _wait_sent(controller, mock, t_frame, t_wall, result)
+                # The frame that engaged waited for the exchange: not a latency.
+                _wait_sent(controller, mock, t_frame, t_wall, result, record=not engaging)
             elif mock is not None:
-                # Engaging offboard is MAVSDK's and the autopilot's real-time exchange:
-                # until it is done, simulated time goes no faster than real time.
                 time.sleep(max(0.0, period_s - (time.monotonic() - t_wall)))
             advance()
 
@@ -501,16 +513,38 @@ def _round(x: float | None) -> float | str | None:
     return None if x is None else ("inf" if math.isinf(x) else round(x, 2))
 
 
-def _wait_sent(controller, mock, t_frame: float, t_wall: float, result: RunResult) -> None:
+EXPOSURE_LEAD_S = 0.001
+"""s: a frame's timestamp precedes the clock reading at which it is decided on"""
+
+ENGAGE_WAIT_S = 5.0
+"""s of real time the lock-stepped clock waits for offboard to engage (MAVSDK gives up on
+a mode switch the heartbeat does not show within about 3 s)"""
+
+
+def _wait_engaged(controller, ticks: int, session_over: threading.Event) -> None:
+    """Lock-stepped, with the simulated clock held: until the supervisor has ticked on the
+    frame's decision (``ticks``: its tick count before the decision) and any engagement
+    that began is over, either way, or :data:`ENGAGE_WAIT_S` of real time passed."""
+    t0 = time.monotonic()
+    while not session_over.is_set() and time.monotonic() - t0 < ENGAGE_WAIT_S:
+        name = controller.state.name
+        if name == "active" or (name != "engaging" and controller.ticks_done > ticks):
+            return
+        time.sleep(0.001)
+
+
+def _wait_sent(controller, mock, t_frame: float, t_wall: float, result: RunResult,
+               record: bool = True) -> None:
     """Until the frame's decision is in a setpoint (and, lock-stepped, at the mock):
-    records the frame → setpoint latency."""
+    records the frame → setpoint latency (with ``record``)."""
     deadline = time.monotonic() + 2.0
     while time.monotonic() < deadline:
         sent = controller.sent
         arrived = sent is not None and sent[0] == t_frame and (
             mock is None or (mock.setpoints and mock.setpoints[-1].t_s >= sent[1]))
         if arrived:
-            result.setpoint_ms.append((sent[1] - t_wall) * 1e3)
+            if record:
+                result.setpoint_ms.append((sent[1] - t_wall) * 1e3)
             return
         time.sleep(0.0002)
 

@@ -394,9 +394,13 @@ class MockAutopilot:
 
     def _setpoint_at(self, t: float) -> SetpointRecord | None:
         """The newest setpoint received at or before ``t`` (simulated s): what the vehicle
-        answers now, after the response's dead time."""
+        answers now, after the response's dead time.
+
+        "At" within a microsecond: the dead times are whole simulation steps, so ``t`` often
+        falls on a setpoint's own time, and the rounding of a clock summed step by step
+        (which differs with how long the run has been going) must not decide the tie."""
         for sp in reversed(self.setpoints):
-            if sp.sim_t_s <= t:
+            if sp.sim_t_s <= t + 1e-6:
                 return sp
         return None
 
