@@ -261,9 +261,15 @@ def test_turn_slowdown_takes_the_share_of_the_turn_still_to_make():
     step = fly(step.state, Decision(3.0, RIGHT, eta_deg=40.0, heading_deg=0.0), 3.0,
                config=slow)
     assert step.forward_m_s == 0.0 and step.yaw_rate_deg_s == 30.0
-    # ... and with 15° still to go, half the speed the ramp allows.
+    # ... and with 15° still to go, at most half the speed: ramped up from 0 at
+    # 0.5 m/s² for 0.5 s, 0.25 m/s, then up to the half and held there, however often
+    # the supervisor ticks (a factor applied every tick would shrink it to a crawl).
     step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0), 3.5, yaw_deg=15.0, config=slow)
-    assert step.forward_m_s == pytest.approx(0.5 * 0.5 * 0.5)
+    assert step.forward_m_s == pytest.approx(0.5 * 0.5)
+    for k in range(1, 41):
+        step = fly(step.state, Decision(3.0 + k * 0.05, RIGHT, 40.0, 0.0),
+                   3.5 + k * 0.05, yaw_deg=15.0, config=slow)
+    assert step.forward_m_s == pytest.approx(0.5)
 
 
 # ------------------------------------------------------------------ range

@@ -228,7 +228,10 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
                 elif target is not None:
                     rate = heading_rate(target, vehicle.yaw_deg, policy)
                     to_turn = abs(wrap_deg(target - vehicle.yaw_deg)) / policy.max_turn_deg
-                    forward *= 1.0 - config.turn_slowdown * min(1.0, to_turn)
+                    # A cap, not a factor on the streamed speed: multiplied in every tick,
+                    # it would compound into a crawl set by the tick rate.
+                    forward = min(forward, config.forward_speed_m_s
+                                  * (1.0 - config.turn_slowdown * min(1.0, to_turn)))
         else:  # hovering: Table II per decision, as in the paper's Table IV
             rate = yaw_rate_setpoint(decision, now_s, config.stale_after_s, policy)
         answer = step(name, stream=True, rate=rate)
