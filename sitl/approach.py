@@ -43,11 +43,13 @@ Time. Against the mock autopilot (the default) the vehicle moves in lock-step wi
 camera: each frame, the mock flies one camera period of simulated time and the companion
 runs on that clock, so a frame that takes 0.12 s to draw (3 s path-traced) costs no
 flight time, as with a real camera. The clock also waits while offboard engages (MAVSDK's
-real-time exchange with the autopilot), so a run flies the same way every time. Against
-another autopilot (``--autopilot URL``, e.g.
-PX4 SITL) everything runs in real time and the harness assumes nothing of it: it maps the
-autopilot's local frame (origin, heading) onto the room where the vehicle hovers when the
-run begins, and renders at the altitude the vehicle actually reports.
+real-time exchange with the autopilot), so that the vehicle starts to act at the same frame
+whenever a run is flown again (the rest of a run repeats too, nearly always: the
+supervisor still ticks in real time; docs/flight.md). Against another autopilot
+(``--autopilot URL``, e.g. PX4 SITL) everything runs in real time and the harness assumes
+nothing of it: it maps the autopilot's local frame (origin, heading) onto the room where
+the vehicle hovers when the run begins, and renders at the altitude the vehicle actually
+reports.
 """
 
 from __future__ import annotations
@@ -471,8 +473,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             if engaging:
                 # Engaging offboard is MAVSDK's and the autopilot's real-time exchange.
                 # The simulated clock waits for it, so that how long it takes in real
-                # time does not decide at which frame the vehicle starts to act: a run
-                # flies the same way every time.
+                # time does not decide at which frame the vehicle starts to act.
                 _wait_engaged(controller, ticks, session_over)
             if controller.state.name == "active":
                 # The frame that engaged waited for the exchange: not a latency.
