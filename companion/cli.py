@@ -96,6 +96,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="with --renderer (and --clips) or --yud: also run each frame, clip or "
                          "photograph mirrored left to right and pool the two, twice the "
                          "sample, to tell a rule change on dev or train from chance")
+    ev.add_argument("--eye-level", action="store_true",
+                    help="with --renderer: each split room seen from the height of its "
+                         "rotated obstacle's top, as a vehicle flying at the furniture's "
+                         "height sees it (the top edge-on, along the horizon)")
     ev.add_argument("--clips", action="store_true",
                     help="with --renderer: per-frame and tracked η on yawing clips")
     ev.add_argument("--long", action="store_true",
@@ -250,6 +254,8 @@ def run_eval(args) -> int:
 
     if args.mirrored and (args.variants or not (args.renderer or args.yud)):
         raise UserError("--mirrored goes with --renderer NAME or --yud DIR (not --variants)")
+    if args.eye_level and (args.clips or not args.renderer):
+        raise UserError("--eye-level goes with --renderer NAME (not --clips)")
     if args.yud:
         args.split = {"dev": "train", None: "test"}.get(args.split, args.split)
         return run_eval_yud(args)
@@ -324,11 +330,12 @@ def run_eval_splits(args) -> int:
                 reports[s] = run_split(renderer, s, cfg, args.workers,
                                        lambda d, t, p=progress, r=renderer, s=s: p.update(
                                            d, t, f"{r} {s}"), focal_given=args.focal_given,
-                                       lens_given=args.lens_given, mirrored=args.mirrored)
+                                       lens_given=args.lens_given, mirrored=args.mirrored,
+                                       eye_level=args.eye_level)
             finally:
                 progress.close()
         for line in format_splits(renderer, reports, args.focal_given, args.lens_given,
-                                  args.mirrored):
+                                  args.mirrored, args.eye_level):
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
@@ -337,7 +344,8 @@ def run_eval_splits(args) -> int:
           + (f" --split {split}" if split != "all" else "")
           + (" --focal-given" if args.focal_given else "")
           + (" --lens-given" if args.lens_given else "")
-          + (" --mirrored" if args.mirrored else "") + ")")
+          + (" --mirrored" if args.mirrored else "")
+          + (" --eye-level" if args.eye_level else "") + ")")
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)

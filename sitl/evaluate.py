@@ -110,6 +110,25 @@ class SceneResult:
     kind: str | None = None  # the compared obstacle's furniture kind (box, table, …)
     focal_est_px: float | None = None  # the focal length the pipeline used (given or estimated)
     focal_true_px: float | None = None
+    eye_level: bool = False  # not detectable only because its top is seen edge-on
+
+
+def _eta_figures(seen: list[SceneResult]) -> dict[str, float | int | None]:
+    """Detection and η figures over the scenes whose obstacle could be ``seen``: how many
+    gave an η, its error's median and p90 (degrees), and the turns the wrong way among
+    those whose true |η| is at least 1°."""
+    hits = [r for r in seen if r.eta_est_deg is not None]
+    err = np.array([abs(r.eta_est_deg - r.eta_true_deg) for r in hits])
+    signed = [r for r in hits if abs(r.eta_true_deg) >= 1.0]
+    wrong = [r for r in signed if np.sign(r.eta_est_deg) != np.sign(r.eta_true_deg)]
+    return {
+        "detected": len(hits),
+        "detection_rate": len(hits) / len(seen) if seen else None,
+        "sign_wrong": len(wrong),
+        "sign_wrong_rate": len(wrong) / len(signed) if signed else None,
+        "eta_err_median_deg": float(np.median(err)) if len(err) else None,
+        "eta_err_p90_deg": float(np.percentile(err, 90)) if len(err) else None,
+    }
 
 
 RANGE_BANDS = ((1.0, 3.0), (3.0, 6.0))
@@ -125,39 +144,30 @@ class EvalReport:
     def _pick(self, pred) -> list[SceneResult]:
         return [r for r in self.results if pred(r)]
 
-    @property
-    def eta_errors(self) -> np.ndarray:
-        hits = self._pick(lambda r: r.detectable and r.eta_est_deg is not None)
-        return np.array([abs(r.eta_est_deg - r.eta_true_deg) for r in hits])
-
     def figures(self) -> dict[str, float | int | None]:
         det = self._pick(lambda r: r.detectable)
         hits = [r for r in det if r.eta_est_deg is not None]
-        signed = [r for r in hits if abs(r.eta_true_deg) >= 1.0]
-        wrong = [r for r in signed if np.sign(r.eta_est_deg) != np.sign(r.eta_true_deg)]
         clean = self._pick(lambda r: not r.has_obstacle)
         fps = [r for r in clean if r.eta_est_deg is not None]
         hidden = self._pick(lambda r: r.has_obstacle and not r.detectable)
-        err = self.eta_errors
         corners = [r.corner_err_pct for r in hits if r.corner_err_pct is not None]
         lat = np.array([r.latency_ms for r in self.results])
+        eye = {f"eye_level_{k}": v
+               for k, v in _eta_figures(self._pick(lambda r: r.eye_level)).items()}
         return {
             "scenes": self.scenes,
             "seed": self.seed,
             "detectable": len(det),
-            "detected": len(hits),
-            "detection_rate": len(hits) / len(det) if det else None,
+            **_eta_figures(det),
             "manhattan_only": len(clean),
             "false_positives": len(fps),
             "false_positive_rate": len(fps) / len(clean) if clean else None,
             "not_detectable": len(hidden),
             "not_detectable_with_eta": sum(r.eta_est_deg is not None for r in hidden),
-            "sign_wrong": len(wrong),
-            "sign_wrong_rate": len(wrong) / len(signed) if signed else None,
-            "eta_err_median_deg": float(np.median(err)) if len(err) else None,
-            "eta_err_p90_deg": float(np.percentile(err, 90)) if len(err) else None,
             "corner_err_pct": float(np.mean(corners)) if corners else None,
             "latency_ms_median": float(np.median(lat)) if len(lat) else None,
+            "eye_level": len(self._pick(lambda r: r.eye_level)),
+            **eye,
             **self.focal_figures(),
             **self.kind_figures(),
             **self.range_figures(),
@@ -206,20 +216,23 @@ def _cache_dir() -> Path:
 
 def draw_scene(renderer: str, seed: int, index: int, obstacle_share: float = 0.7,
                width: int = 640, height: int = 480, hfov_deg: float | None = None,
-               mirrored: bool = False):
+               mirrored: bool = False, eye_level: bool = False):
     """Scene ``index`` of ``seed`` drawn by ``renderer``: (image BGR, :class:`SceneTruth`).
     Path-traced frames are cached on disk. ``mirrored``: the frame and its truth mirrored
-    left to right (:func:`sitl.scene.mirror`)."""
-    image, truth = _draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg)
+    left to right (:func:`sitl.scene.mirror`). ``eye_level``: the same room seen from the
+    height of its rotated obstacle's top (:func:`sitl.scene.at_eye_level`)."""
+    image, truth = _draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg,
+                               eye_level)
     return mirror(image, truth) if mirrored else (image, truth)
 
 
 def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float,
-                width: int, height: int, hfov_deg: float | None):
+                width: int, height: int, hfov_deg: float | None, eye_level: bool = False):
     rng = np.random.default_rng([seed, index])
     has_obstacle = bool(rng.random() < obstacle_share)
     if renderer == "scene":
-        scene, cam = random_scene(rng, width, height, obstacle=has_obstacle, hfov_deg=hfov_deg)
+        scene, cam = random_scene(rng, width, height, obstacle=has_obstacle, hfov_deg=hfov_deg,
+                                  eye_level=eye_level)
         image, truth = render(scene, cam)
         return image, truth
     if renderer != "pathtraced":
@@ -227,11 +240,12 @@ def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float,
     from sitl import pathtraced
 
     fov = "any" if hfov_deg is None else f"{hfov_deg:g}"
-    name = f"{width}x{height}-{fov}/{seed}-{index}-share{obstacle_share:g}.png"
+    eye = "eye-" if eye_level and has_obstacle else ""
+    name = f"{width}x{height}-{fov}/{eye}{seed}-{index}-share{obstacle_share:g}.png"
     # Small frames get more samples per pixel: the same light per unit of the scene.
     spp = 16 if width * height >= 640 * 480 else 32
     r3, cam = pathtraced.random_room(rng, width, height, obstacle=has_obstacle,
-                                     hfov_deg=hfov_deg, spp=spp)
+                                     hfov_deg=hfov_deg, spp=spp, eye_level=eye_level)
     return _render_cached(name, r3, cam)
 
 
@@ -278,11 +292,12 @@ def evaluate_scene(
     hfov_deg: float | None = None,
     assume_lens: bool = False,
     mirrored: bool = False,
+    eye_level: bool = False,
 ) -> SceneResult:
-    """Draw scene ``index`` of ``seed`` (``mirrored`` left to right if asked), run the
-    pipeline, compare with the truth."""
+    """Draw scene ``index`` of ``seed`` (``mirrored`` left to right, ``eye_level`` from the
+    obstacle's height, if asked), run the pipeline, compare with the truth."""
     image, truth = draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg,
-                              mirrored)
+                              mirrored, eye_level)
     cfg = config or Config()
     lens = assume_lens and bool(truth.distortion)
     if assume_focal or assume_lens:
@@ -299,7 +314,8 @@ def evaluate_scene(
 
     targets = [o for o in truth.obstacles if o.non_manhattan]
     detectable = [o for o in targets if o.detectable]
-    target = (detectable or targets or [None])[0]
+    edge_on = [o for o in targets if o.eye_level]
+    target = (detectable or edge_on or targets or [None])[0]
     corner_err = range_true = None
     if targets and est.obstacles:
         matched, d = _match(in_frame(est.obstacles[0].corners_px), truth)
@@ -324,6 +340,7 @@ def evaluate_scene(
         kind=None if target is None else target.kind,
         focal_est_px=est.focal_px,
         focal_true_px=truth.focal_px,
+        eye_level=bool(edge_on) and not detectable,
     )
 
 
@@ -345,12 +362,14 @@ def run_eval(
     hfov_deg: float | None = None,
     assume_lens: bool = False,
     mirrored: bool = False,
+    eye_level: bool = False,
 ) -> EvalReport:
     """Evaluate ``scenes`` seeded scenes; ``progress(done, total)`` is called as they finish.
     With ``mirrored``, each scene is also evaluated mirrored left to right, and the report
-    pools both: twice the results, for telling a rule change from chance on dev."""
+    pools both: twice the results, for telling a rule change from chance on dev. With
+    ``eye_level`` each room is seen from its rotated obstacle's height."""
     jobs = [(seed, i, config, obstacle_share, width, height, assume_focal, renderer, hfov_deg,
-             assume_lens, flip)
+             assume_lens, flip, eye_level)
             for i in range(scenes) for flip in orientations(mirrored)]
     total = len(jobs)
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
@@ -408,11 +427,13 @@ def format_report(report: EvalReport) -> list[str]:
 
 def run_split(renderer: str, split: str, config: Config | None = None,
               workers: int | None = None, progress=None, focal_given: bool = False,
-              lens_given: bool = False, mirrored: bool = False) -> dict[str, EvalReport]:
+              lens_given: bool = False, mirrored: bool = False,
+              eye_level: bool = False) -> dict[str, EvalReport]:
     """One frozen split of one renderer at every camera of :data:`CAMERAS`, focal length
     not given (unless ``focal_given``, or ``lens_given``: the focal length and the lens
     distortion, diagnoses): {camera label: report}. ``mirrored``: each frame also run
-    mirrored, pooled (:func:`run_eval`).
+    mirrored, pooled (:func:`run_eval`). ``eye_level``: the split's rooms seen from their
+    rotated obstacle's height (:func:`sitl.scene.at_eye_level`).
     ``progress(done, total)`` counts frames."""
     seed, scenes = SPLITS[(renderer, split)]
     per_camera = scenes * (2 if mirrored else 1)
@@ -425,7 +446,7 @@ def run_split(renderer: str, split: str, config: Config | None = None,
         out[label] = run_eval(scenes, seed, config, width=w, height=h,
                               assume_focal=focal_given,
                               workers=workers, progress=step, renderer=renderer, hfov_deg=fov,
-                              assume_lens=lens_given, mirrored=mirrored)
+                              assume_lens=lens_given, mirrored=mirrored, eye_level=eye_level)
     return out
 
 
@@ -436,8 +457,9 @@ def _split_target(label: str) -> dict[str, float]:
 
 def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
                   focal_given: bool = False, lens_given: bool = False,
-                  mirrored: bool = False) -> list[str]:
-    """One table for a renderer: a row per camera and split, issue 18's targets beside."""
+                  mirrored: bool = False, eye_level: bool = False) -> list[str]:
+    """One table for a renderer: a row per camera and split, issue 18's targets beside;
+    then, per row, the obstacles seen at eye level, by furniture kind, and the range."""
 
     def pct(x):
         return "n/a" if x is None else f"{100 * x:.1f}"
@@ -450,6 +472,8 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
         given = "and lens distortion given (a diagnosis: the targets are without them)"
     if mirrored:
         given += "; each frame also mirrored left to right, the two pooled"
+    if eye_level:
+        given += "; each room seen from its rotated obstacle's height"
     lines = [f"renderer {renderer}: focal length {given}",
              f"{'camera':<14} {'split':<5} {'seed':>5} {'det %':>6} {'η med°':>7} {'η p90°':>7} "
              f"{'FP %':>5} {'sign✗':>7} {'corner %':>8} {'f err %':>10}   targets det/med/p90"]
@@ -475,6 +499,17 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
             f" {pct(f['focal_err_median']) + '/' + pct(f['focal_err_p90']):>10}"
             f"   >={100 * t['detection_rate']:.0f}/<={t['eta_err_median_deg']:g}/"
             f"<={t['eta_err_p90_deg']:g}" + (f"  MISSED {','.join(miss)}" if miss else "  ok"))
+    lines.append("seen at eye level (the top edge-on, along the horizon; not in det %): "
+                 "detected / n, η median / p90, sign✗:")
+    for label, split, f in figures:
+        if f["eye_level"]:
+            lines.append(
+                f"  {label:<14} {split:<5} {f['eye_level_detected']}/{f['eye_level']} "
+                f"({pct(f['eye_level_detection_rate'])} %), "
+                f"{deg(f['eye_level_eta_err_median_deg'])}° / "
+                f"{deg(f['eye_level_eta_err_p90_deg'])}°, {f['eye_level_sign_wrong']}")
+        else:
+            lines.append(f"  {label:<14} {split:<5} none")
     lines.append("f err: relative error of the focal length each frame rested on, median / "
                  "p90; detected / detectable by obstacle kind:")
     for label, split, f in figures:

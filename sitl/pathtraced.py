@@ -49,6 +49,7 @@ from sitl.scene import (
     Scene,
     SceneTruth,
     WallRect,
+    at_eye_level,
     random_colour,
     random_decorations,
     scene_truth,
@@ -596,14 +597,16 @@ def _furniture(rng, kind: str, x: float, y: float, yaw: float) -> Furniture:
 
 def random_room(rng: np.random.Generator, width: int = 640, height: int = 480,
                 obstacle: bool = True, hfov_deg: float | None = None,
-                spp: int = 16) -> tuple[Room3D, Camera]:
+                spp: int = 16, eye_level: bool = False) -> tuple[Room3D, Camera]:
     """A random furnished room and camera (all randomness from ``rng``).
 
     With ``obstacle`` one piece of furniture (box, table, cabinet or sofa) is rotated
     12°–45° off the room's axes, 2.2–5 m ahead within the field of view, and a second
     rotated one stands elsewhere in a third of the rooms; 0–2 further pieces (1–3 without
     an obstacle) are aligned with the room. The field of view is ``hfov_deg``, else drawn
-    from 50–110°.
+    from 50–110°. With ``eye_level`` the camera is then moved to the height of the
+    rotated piece's top (:func:`sitl.scene.at_eye_level`): the same room, seen from the
+    furniture's height.
     """
     length, wid = rng.uniform(7.0, 12.0), rng.uniform(5.0, 9.0)
     room_h = rng.uniform(2.5, 3.2)
@@ -649,6 +652,7 @@ def random_room(rng: np.random.Generator, width: int = 640, height: int = 480,
 
     if obstacle:
         rotated(near=True)
+        ahead = pieces[0] if pieces else None
         if rng.random() < 1 / 3:
             rotated(near=False)
     for _ in range(int(rng.integers(0 if obstacle else 1, 3 if obstacle else 4))):
@@ -661,7 +665,10 @@ def random_room(rng: np.random.Generator, width: int = 640, height: int = 480,
     decorations = tuple(r for r in random_decorations(rng, room0, clutter=True)
                         if isinstance(r, WallRect))
     room = replace(room0, decorations=decorations)
-    return Room3D(room, tuple(pieces), random_look(rng, spp)), cam
+    look = random_look(rng, spp)
+    if eye_level and obstacle and ahead is not None:
+        cam = at_eye_level(rng, cam, ahead.bounding_box().height)
+    return Room3D(room, tuple(pieces), look), cam
 
 
 def random_look(rng: np.random.Generator, spp: int = 16) -> Look:

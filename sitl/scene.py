@@ -221,6 +221,12 @@ class ObstacleTruth:
     """visible bottom corners: [x, y, range_m], range the horizontal distance from the
     camera, metres (the truth of :mod:`companion.vision.ranging`)"""
     kind: str = "box"  # what the box bounds: box, table, cabinet or sofa (sitl.pathtraced)
+    eye_level: bool = False
+    """not ``detectable`` only because the top is seen edge-on, at the camera's height:
+    a vertical edge passes every test of ``detectable`` but that its top corner's two
+    horizontal edges are apart, which they cannot be when both lie along the horizon. Its
+    bottom corner and the vertical edge still fix the obstacle's OVPs (the horizon stands
+    in for the top edges)"""
 
 
 @dataclass(frozen=True)
@@ -483,30 +489,31 @@ def _box_truth(scene: Scene, cam: Camera, k: int, min_edge_px: float) -> Obstacl
     rel = _fold45(box.yaw_deg)
     non_manhattan = abs(rel) >= scene.min_rel_yaw_deg
 
-    detectable = False
+    # A vertical edge whose two ends are corners with both horizontal edges in view, each
+    # pair apart in the image: detectable. Apart everywhere but at the top: eye level.
+    detectable = eye_level = False
     if non_manhattan:
         for i in range(4):
             b, t = i, i + 4
             if not (vis[b] and vis[t]) or np.linalg.norm(uv[b] - uv[t]) < min_edge_px:
                 continue
-            ok = True
-            for ring, ci in ((bottom, i), (top, i)):
+            seen, apart = [], []
+            for ring in (bottom, top):
                 runs, dirs = [], []
                 for nb in ((i + 1) % 4, (i + 3) % 4):
-                    runs.append(_visible_run_px(scene, cam, ring[ci], ring[nb]))
+                    runs.append(_visible_run_px(scene, cam, ring[i], ring[nb]))
                     pu, _ = cam.project(
-                        np.vstack([ring[ci], ring[ci] + 0.05 * (ring[nb] - ring[ci])])
+                        np.vstack([ring[i], ring[i] + 0.05 * (ring[nb] - ring[i])])
                     )
                     dirs.append((pu[1] - pu[0]) / max(np.linalg.norm(pu[1] - pu[0]), 1e-9))
-                apart = abs(dirs[0][0] * dirs[1][1] - dirs[0][1] * dirs[1][0]) >= math.sin(
-                    math.radians(10)
-                )
-                if min(runs) < min_edge_px or not apart:
-                    ok = False
-                    break
-            if ok:
+                seen.append(min(runs) >= min_edge_px)
+                apart.append(abs(dirs[0][0] * dirs[1][1] - dirs[0][1] * dirs[1][0])
+                             >= math.sin(math.radians(10)))
+            if all(seen) and all(apart):
                 detectable = True
                 break
+            eye_level = eye_level or (all(seen) and apart[0])
+        eye_level = eye_level and not detectable
     return ObstacleTruth(
         box=k,
         rel_yaw_deg=rel,
@@ -517,6 +524,7 @@ def _box_truth(scene: Scene, cam: Camera, k: int, min_edge_px: float) -> Obstacl
         phi_deg=phi,
         corners_px=uv[vis].tolist(),
         detectable=detectable,
+        eye_level=eye_level,
         floor_corners=[[float(uv[i][0]), float(uv[i][1]),
                         float(math.hypot(*(bottom[i][:2] - cam.position[:2])))]
                        for i in range(4) if vis[i]],
@@ -641,6 +649,7 @@ def random_scene(
     aligned_boxes: int | None = None,
     clutter: bool = True,
     hfov_deg: float | None = None,
+    eye_level: bool = False,
 ) -> tuple[Scene, Camera]:
     """A random room, camera and boxes (all randomness from ``rng``).
 
@@ -649,7 +658,9 @@ def random_scene(
 
     With ``obstacle`` one box is rotated 12°–45° off the room's axes and placed 2.2–5 m
     ahead inside the field of view; ``aligned_boxes`` (random 0–2 by default, 1–3 without
-    an obstacle) are Manhattan boxes anywhere in the room.
+    an obstacle) are Manhattan boxes anywhere in the room. With ``eye_level`` the camera
+    is then moved to the height of the rotated box's top (:func:`at_eye_level`): the
+    same room, seen by a vehicle flying at the furniture's height.
     """
     length, wid = rng.uniform(7.0, 12.0), rng.uniform(5.0, 9.0)
     room_h = rng.uniform(2.5, 3.2)
@@ -709,6 +720,7 @@ def random_scene(
             if free(x, y, b.radius()):
                 boxes.append(b)
                 break
+    rotated = boxes[0] if boxes else None
     n_aligned = (
         aligned_boxes
         if aligned_boxes is not None
@@ -746,7 +758,20 @@ def random_scene(
         blur_sigma=float(rng.uniform(0.4, 1.0)),
         seed=int(rng.integers(0, 2**31 - 1)),
     )
+    if eye_level and rotated is not None:
+        cam = at_eye_level(rng, cam, rotated.height)
     return scene, cam
+
+
+EYE_LEVEL_M = 0.15
+"""an eye-level camera is within this of the obstacle's top (2–4° at 2.2–5 m)"""
+
+
+def at_eye_level(rng: np.random.Generator, cam: Camera, top_m: float) -> Camera:
+    """``cam`` moved up or down to within :data:`EYE_LEVEL_M` of ``top_m`` (metres above
+    the floor), as a vehicle flying at a piece of furniture's height sees it: the top is
+    seen edge-on, along the horizon, where every horizontal direction looks alike."""
+    return replace(cam, height_m=float(top_m + rng.uniform(-EYE_LEVEL_M, EYE_LEVEL_M)))
 
 
 # --------------------------------------------------------------------------- video

@@ -270,6 +270,9 @@ def test_bench_and_sim_reject_bad_arguments_in_one_line():
     _assert_one_line_error(run("eval", "--renderer", "scene", "--clips", "--lens-given"),
                            "are for the splits")
     _assert_one_line_error(run("eval", "--mirrored"), "--mirrored goes with --renderer")
+    _assert_one_line_error(run("eval", "--eye-level"), "--eye-level goes with --renderer")
+    _assert_one_line_error(run("eval", "--renderer", "scene", "--clips", "--eye-level"),
+                           "--eye-level goes with --renderer")
 
 
 def test_dry_run_needs_no_mavlink_packages(sample_video):

@@ -211,3 +211,45 @@ def test_a_bare_wall_over_the_floor_is_understood_without_any_vertical_edge():
     assert not est.layout.found  # nothing vertical to back V3
     assert est.scene_understood and est.eta_deg is None
     assert not _pipeline(cam.focal_px)(np.full_like(image, 128)).scene_understood
+
+
+def test_a_box_seen_from_its_own_height_is_at_eye_level_not_detectable():
+    """Seen from above, a rotated box's near edge has a full corner at each end; from the
+    height of its top, the top's two edges lie along the horizon, one line in the picture,
+    and only the bottom corner is a corner."""
+    box = Box(4.0, 0.3, 30.0, 1.2, 0.8, 1.0)
+    views = {h: render(Scene(boxes=(box,)), Camera(height_m=h, yaw_deg=5.0))[1].obstacles[0]
+             for h in (1.6, 1.02)}
+    assert views[1.6].detectable and not views[1.6].eye_level
+    assert views[1.02].eye_level and not views[1.02].detectable
+    assert views[1.02].non_manhattan and views[1.02].eta_deg == pytest.approx(
+        views[1.6].eta_deg, abs=0.5)  # the camera only moved up or down
+
+
+def test_an_eye_level_room_is_the_same_room_seen_from_the_obstacles_height():
+    from sitl.scene import EYE_LEVEL_M, random_scene
+
+    for i in range(6):
+        scene, cam = random_scene(np.random.default_rng([7, i]), obstacle=True)
+        seen, low = random_scene(np.random.default_rng([7, i]), obstacle=True, eye_level=True)
+        assert seen == scene and replace(low, height_m=cam.height_m) == cam
+        assert abs(low.height_m - scene.boxes[0].height) <= EYE_LEVEL_M
+    # Without a rotated obstacle there is no height to fly at: nothing moves.
+    plain = random_scene(np.random.default_rng([7, 0]), obstacle=False)
+    assert random_scene(np.random.default_rng([7, 0]), obstacle=False, eye_level=True) == plain
+
+
+def test_the_report_scores_eye_level_obstacles_apart_from_detectable_ones():
+    def result(detectable, eye_level, eta_est):
+        return SceneResult(index=0, has_obstacle=True, detectable=detectable, eta_true_deg=20.0,
+                           eta_est_deg=eta_est, corner_err_pct=None, latency_ms=1.0,
+                           eye_level=eye_level)
+
+    report = EvalReport(4, 0, [result(True, False, 21.0), result(False, True, None),
+                               result(False, True, 23.0), result(False, True, -18.0)])
+    f = report.figures()
+    assert (f["detected"], f["detectable"], f["eta_err_median_deg"]) == (1, 1, 1.0)
+    assert (f["eye_level_detected"], f["eye_level"]) == (2, 3)
+    assert f["eye_level_detection_rate"] == pytest.approx(2 / 3)
+    assert f["eye_level_eta_err_median_deg"] == pytest.approx(20.5)  # of 3° and 38°
+    assert f["eye_level_sign_wrong"] == 1
