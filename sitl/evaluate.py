@@ -260,7 +260,9 @@ def _render_cached(name: str, r3, cam):
         return image, pathtraced.truth(r3, cam)
     image, truth = pathtraced.render(r3, cam)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.png")
+    # Two workers may render one frame at once (a scene and its mirror, with --mirrored):
+    # each writes its own file, and the last replace wins with the same picture.
+    tmp = path.with_suffix(f".{os.getpid()}.tmp.png")
     cv2.imwrite(str(tmp), image)
     os.replace(tmp, path)
     return image, truth

@@ -120,3 +120,44 @@ def test_a_pathtraced_clip_is_rendered_once_then_read_back(tmp_path, monkeypatch
     assert np.abs(a.astype(int) - b.astype(int)).mean() > 1.0  # the camera yawed
     assert all(p.parent.name == "clips-2" for p in frames)  # not the older renders' folder
     assert evaluate_clip(21, 0, frames=2, renderer="pathtraced") == first  # from the cache
+
+
+def _render_with_a_peer(barrier, room, cam, name, results):
+    """Child process: render through the cache, waiting for the peer before writing."""
+    import sitl.pathtraced as pathtraced
+    from sitl.evaluate import _render_cached
+
+    real = pathtraced.render
+
+    def render_then_wait(r3, c):
+        out = real(r3, c)
+        barrier.wait(timeout=60)  # both write the frame at the same moment
+        return out
+
+    pathtraced.render = render_then_wait
+    try:
+        image, _ = _render_cached(name, room, cam)
+        results.put(image.shape)
+    except Exception as e:  # reported to the test, which fails on it
+        results.put(repr(e))
+
+
+def test_two_workers_rendering_one_frame_both_cache_it(tmp_path, monkeypatch):
+    # With --mirrored a scene and its mirror are two jobs that draw the same frame: two
+    # workers render it at once into one cache file, and neither may fail.
+    import multiprocessing
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    room, cam = _room()
+    room = replace(room, look=replace(room.look, spp=1))
+    ctx = multiprocessing.get_context("fork")
+    barrier, results = ctx.Barrier(2), ctx.Queue()
+    procs = [ctx.Process(target=_render_with_a_peer, args=(barrier, room, cam, "f.png", results))
+             for _ in range(2)]
+    for p in procs:
+        p.start()
+    got = [results.get(timeout=120) for _ in procs]
+    for p in procs:
+        p.join()
+    assert got == [(240, 320, 3)] * 2
+    assert [p.name for p in tmp_path.rglob("*.png")] == ["f.png"]
