@@ -870,3 +870,54 @@ def test_box_ovps_need_an_edge_toward_each_ovp():
     for got, want in zip(fitted, free, strict=True):
         assert angle_between_directions_deg(direction_of(got, F, C),
                                             direction_of(want, F, C)) < 1e-6
+
+
+def _face_at_eye_level(yaw_deg=35.0):
+    """One face of a box 4 m ahead, ``yaw_deg`` off the view, seen from the height of its
+    top (1.2 m above the floor): its top edge lies on the horizon, along every horizontal
+    direction at once, so the labels call it a room edge (V1). Returns the segments (two
+    vertical edges, top, bottom), their labels and the face's direction on the floor."""
+    a = np.radians(yaw_deg)
+    u = np.array([np.cos(a), 0.0, np.sin(a)])
+    front = np.array([0.2, 1.2, 4.0])
+    up = np.array([0.0, -1.2, 0.0])
+    b0, b1, t0, t1 = _project([front, front + 0.8 * u, front + up, front + up + 0.8 * u])
+    segs = np.array([[*b0, *t0], [*b1, *t1], [*t0, *t1], [*b0, *b1]])
+    return segs, np.array([V3, V3, V1, NONE]), u
+
+
+def test_a_face_seen_at_eye_level_takes_its_top_edge_along_the_horizon():
+    from companion.vision.obstacles import find_obstacles
+
+    segs, labels, u = _face_at_eye_level()
+    assert np.abs(segs[2, [1, 3]] - C[1]).max() < 1e-6  # the top edge is on the horizon
+    found = find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                           labels)
+    assert len(found) == 1
+    dirs = direction_of(found[0].ovps[:2], F, C)
+    assert angle_between_directions_deg(dirs, u[None, :]).min() < 0.5
+
+
+def test_a_face_at_eye_level_needs_both_its_vertical_edges():
+    # With its top edge-on, a face's direction comes from its bottom edge alone: one
+    # vertical edge with a leg at its foot is a shadow's or a rug's corner as often.
+    from companion.vision.obstacles import find_obstacles
+
+    segs, labels, _ = _face_at_eye_level()
+    keep = [0, 2, 3]
+    segs, labels = segs[keep], labels[keep]
+    assert find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                          labels) == []
+
+
+def test_a_face_at_eye_level_whose_foot_is_a_room_edge_is_no_box():
+    # A room edge leaving the foot of each vertical edge toward the face says the thing
+    # stands aligned with the room, the rotated leg beside it a shadow or a reflection.
+    from companion.vision.obstacles import find_obstacles
+
+    segs, labels, _ = _face_at_eye_level()
+    feet = _project([[0.2, 1.2, 4.0], [0.2 + 0.8, 1.2, 4.0]])
+    room_edge = np.array([[*feet[0], *feet[1]]])
+    segs, labels = np.vstack([segs, room_edge]), np.append(labels, V1)
+    assert find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                          labels) == []
