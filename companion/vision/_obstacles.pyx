@@ -68,7 +68,6 @@ cdef struct Hypothesis:
     int nlegs
     double points[8]
     int npoints
-    bint edge_on  # a silhouette half whose top leg is a room edge along the horizon
 
 
 cdef struct Hypotheses:
@@ -90,7 +89,6 @@ cdef Hypothesis* new_hypothesis(Hypotheses* hs) except NULL:
     h.corner = -1
     h.nlegs = 0
     h.npoints = 0
-    h.edge_on = False
     return h
 
 
@@ -474,44 +472,6 @@ cdef bint room_leg_nearer(Params* p, double[:, ::1] s, double[::1] lengths,
     return False
 
 
-cdef bint room_leg_at(Params* p, double[:, ::1] s, double[::1] lengths,
-                      Py_ssize_t[::1] manhattan_idx, tuple chain, int end,
-                      double leg_side) noexcept:
-    """Whether a Manhattan segment (``manhattan_idx``) leaves end ``end`` of the vertical
-    edge ``chain`` toward the side ``leg_side`` (:func:`leaves_end`)."""
-    cdef double axx = (chain[2] - chain[0]) / chain[4], axy = (chain[3] - chain[1]) / chain[4]
-    cdef double side
-    cdef Py_ssize_t j
-    for j in range(manhattan_idx.shape[0]):
-        if leaves_end(s, lengths, manhattan_idx[j], chain[2 * end], chain[2 * end + 1], axx,
-                      axy, p, &side) and side * leg_side > 0:
-            return True
-    return False
-
-
-cdef list horizon_legs(Frame* fr, Params* p, double[:, ::1] s, double[::1] lengths,
-                       Py_ssize_t[::1] manhattan_idx, tuple chain, int end):
-    """The Manhattan segments (``manhattan_idx``) leaving end ``end`` of the vertical edge
-    ``chain`` that lie on the horizon, the end and both their ends within ``radius_px`` of
-    it: (segment, side) pairs as :func:`edge_legs` gives legs. Seen from the height of its
-    top, a face's top edge lies along the horizon, where every horizontal direction looks
-    alike, so the labels may call it V1 or V2."""
-    out = []
-    cdef double axx = (chain[2] - chain[0]) / chain[4], axy = (chain[3] - chain[1]) / chain[4]
-    cdef double ex = chain[2 * end], ey = chain[2 * end + 1], side
-    cdef Py_ssize_t j, k
-    if fabs(below_horizon(fr, ex, ey)) > p.radius_px:
-        return out
-    for j in range(manhattan_idx.shape[0]):
-        k = manhattan_idx[j]
-        if fabs(below_horizon(fr, s[k, 0], s[k, 1])) > p.radius_px \
-                or fabs(below_horizon(fr, s[k, 2], s[k, 3])) > p.radius_px:
-            continue
-        if leaves_end(s, lengths, k, ex, ey, axx, axy, p, &side):
-            out.append((k, 1.0 if side > 0 else -1.0))
-    return out
-
-
 cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] lengths,
                             double[:, ::1] lines, list edges, Py_ssize_t[::1] manhattan_idx,
                             Hypotheses* halves) except *:
@@ -522,30 +482,15 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] 
     horizontal edges bound one face they are parallel in space and meet at that face's
     OVP (eqs. 6–8 with one leg per corner), which must lie on the horizon and away from
     V1 and V2. A leg that a room edge beats to its end is not the edge's
-    (:func:`room_leg_nearer`).
-
-    Seen from the height of its top, the face's top edge lies on the horizon and is
-    labelled a room edge: a Manhattan segment on the horizon leaving an end that lies on
-    it stands for that end's leg (:func:`horizon_legs`), the half marked ``edge_on``. Its
-    OVP then rests on the bottom leg alone, and a room edge leaving the bottom end toward
-    the same side says the thing is aligned with the room and the leg a shadow or a
-    reflection beside it (:func:`room_leg_at`)."""
+    (:func:`room_leg_nearer`)."""
     cdef double o[3]
     cdef double d[3]
     cdef Py_ssize_t ka, kb
-    cdef bint top_a, top_b
     cdef Hypothesis* h
     for chain, legs_a, legs_b in edges:
-        tops_a = horizon_legs(fr, p, s, lengths, manhattan_idx, chain, 0)
-        tops_b = horizon_legs(fr, p, s, lengths, manhattan_idx, chain, 1)
-        for ka, sa in legs_a + tops_a:
-            top_a = (ka, sa) in tops_a
-            for kb, sb in legs_b + tops_b:
-                top_b = (kb, sb) in tops_b
-                if sa != sb or (top_a and top_b):
-                    continue
-                if (top_a and room_leg_at(p, s, lengths, manhattan_idx, chain, 1, sb)) \
-                        or (top_b and room_leg_at(p, s, lengths, manhattan_idx, chain, 0, sa)):
+        for ka, sa in legs_a:
+            for kb, sb in legs_b:
+                if sa != sb:
                     continue
                 if not intersect(&lines[ka, 0], &lines[kb, 0], o):
                     continue
@@ -556,7 +501,6 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] 
                     continue
                 h = new_hypothesis(halves)
                 h.d1[0], h.d1[1], h.d1[2] = d[0], d[1], d[2]
-                h.edge_on = top_a or top_b
                 h.edge = chain[4]
                 h.legs[0], h.legs[1] = ka, kb
                 h.nlegs = 2
@@ -604,9 +548,7 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
     angle is taken through the focal length, so the room's V1 and V2 must be at one within
     the same tolerance (a wrong focal length shows there). A face has two outline edges, so
     three or more halves on one OVP are no face: a striped rug, whose stripes can pass for
-    verticals, also has two parallel edges. A half whose top is edge-on (its OVP from the
-    bottom leg alone) needs the face's other outline edge to agree: one vertical edge with
-    a leg at its foot is a shadow's or a rug's corner as often as a box's."""
+    verticals, also has two parallel edges."""
     cdef Py_ssize_t i, j, k, agree
     cdef bint ambiguous
     cdef double d2[3]
@@ -629,7 +571,7 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
                 agree += 1
             elif same_edge(a, &halves.items[j]):
                 ambiguous = True
-        if agree > 2 or ambiguous or (a.edge_on and agree < 2):
+        if agree > 2 or ambiguous:
             continue
         cross3(fr.d3, a.d1, d2)
         if unit3(d2) <= 0:

@@ -106,9 +106,7 @@ def find_obstacles(
     a room edge comes nearer than the leg, by more than ``noise_px``, on the leg's side,
     the end is a door frame's corner and the leg not the edge's); (with
     ``hidden_edge_corners``) two legs meeting where no vertical edge shows, one of them
-    running on to a vertical edge at its far end; a box showing one face (seen from the
-    height of its top, the face's top edge lies on the horizon and is labelled a room
-    edge: it stands for that leg, and both outline edges of the face must agree); and last a
+    running on to a vertical edge at its far end; a box showing one face; and last a
     face's top edge with vertical edges hanging from it (a table seen from the front, its
     legs under the top).
 
