@@ -152,8 +152,8 @@ class EvalReport:
         hidden = self._pick(lambda r: r.has_obstacle and not r.detectable)
         corners = [r.corner_err_pct for r in hits if r.corner_err_pct is not None]
         lat = np.array([r.latency_ms for r in self.results])
-        eye = {f"eye_level_{k}": v
-               for k, v in _eta_figures(self._pick(lambda r: r.eye_level)).items()}
+        eye_seen = self._pick(lambda r: r.eye_level)
+        eye = {f"eye_level_{k}": v for k, v in _eta_figures(eye_seen).items()}
         return {
             "scenes": self.scenes,
             "seed": self.seed,
@@ -166,7 +166,7 @@ class EvalReport:
             "not_detectable_with_eta": sum(r.eta_est_deg is not None for r in hidden),
             "corner_err_pct": float(np.mean(corners)) if corners else None,
             "latency_ms_median": float(np.median(lat)) if len(lat) else None,
-            "eye_level": len(self._pick(lambda r: r.eye_level)),
+            "eye_level": len(eye_seen),
             **eye,
             **self.focal_figures(),
             **self.kind_figures(),
