@@ -6,8 +6,9 @@ view from the pose the autopilot reports over MAVLink (MAVSDK's ``position_veloc
 and ``attitude_euler``), the pipeline and Table II decide, the offboard controller streams
 the setpoints over real MAVLink, and the autopilot moves. The run ends as
 
-- **collision**: the vehicle's body, a disc of radius :data:`BODY_RADIUS_M` at its
-  altitude, touches the obstacle, a wall or other furniture;
+- **collision**: the vehicle's body, a cylinder of radius :data:`BODY_RADIUS_M` reaching
+  :data:`BODY_HALF_HEIGHT_M` above and below its altitude, touches the obstacle, a wall or
+  other furniture;
 - **passed**: it crossed the line :data:`PASS_MARGIN_M` beyond the obstacle's far side
   (measured along the original course) without a collision;
 - **timeout**: neither within the run's time limit.
@@ -23,6 +24,7 @@ start                  1.5 m from the near wall, within ±1 m of the room's midd
 obstacle               centre 3–7 m ahead, within ±0.5 m of the line of flight,
                        rotated 12°–45° off the room's axes (either way), 0.8–1.6 m
                        by 0.5–1.0 m, 0.4–1.0 m taller than the flight altitude
+                       (``--eye-level``: 0.1–0.25 m taller, :meth:`Approach.at_eye_level`)
 furniture              0–3 aligned (Manhattan) boxes along the side walls
 flight                 takeoff altitude 0.8–1.3 m requested (the harness reads the
                        altitude the autopilot levels off at), forward speed
@@ -88,6 +90,7 @@ __all__ = ["Approach", "RunResult", "draw_approach", "fly_approach", "first_cont
 
 POLICIES = ("paper", "none", "oracle")
 BODY_RADIUS_M = 0.25
+BODY_HALF_HEIGHT_M = 0.1  # frame, props and camera: 0.2 m from the skids to the props' tips
 PASS_MARGIN_M = 1.0
 ROOM_LENGTH_M = (14.0, 18.0)
 ROOM_WIDTH_M = (10.0, 14.0)
@@ -101,6 +104,7 @@ OBSTACLE_REL_YAW_DEG = (12.0, 45.0)
 OBSTACLE_LENGTH_M = (0.8, 1.6)
 OBSTACLE_WIDTH_M = (0.5, 1.0)
 OBSTACLE_ABOVE_FLIGHT_M = (0.4, 1.0)
+OBSTACLE_ABOVE_EYE_LEVEL_M = (0.1, 0.25)  # --eye-level: Approach.at_eye_level
 FURNITURE = (0, 3)
 ALTITUDE_M = (0.8, 1.3)
 SPEED_M_S = (0.4, 0.8)
@@ -153,13 +157,27 @@ class Approach:
         return replace(self, room=room, boxes=(replace(self.boxes[0], height=height),
                                                *self.boxes[1:]))
 
+    def at_eye_level(self) -> Approach:
+        """The same run with the obstacle's top :data:`OBSTACLE_ABOVE_EYE_LEVEL_M` above the
+        hover altitude: once PX4's altitude creep in offboard (0.2 m, PX4-NOTES.md) has
+        lifted the vehicle, the camera flies 0.25 m below to 0.1 m above the top and sees
+        it within a few degrees of edge-on, along the horizon, all the way in, and the
+        body still cannot clear it. The height is the drawn one scaled into that range,
+        so every other draw, and the room, is the run's own."""
+        lo, hi = OBSTACLE_ABOVE_FLIGHT_M
+        elo, ehi = OBSTACLE_ABOVE_EYE_LEVEL_M
+        return replace(self, obstacle_above_m=elo + (ehi - elo)
+                       * (self.obstacle_above_m - lo) / (hi - lo))
+
     def scene(self) -> Scene:
         return Scene(room=self.room, boxes=self.boxes, noise_sigma=self.noise_sigma,
                      blur_sigma=self.blur_sigma, seed=self.scene_seed)
 
 
-def draw_approach(seed: int, run: int) -> Approach:
-    """Run ``run`` of the scenario set ``seed`` (the ranges in the module docstring)."""
+def draw_approach(seed: int, run: int, eye_level: bool = False) -> Approach:
+    """Run ``run`` of the scenario set ``seed`` (the ranges in the module docstring);
+    ``eye_level``: the same run with the obstacle's top near the flight altitude
+    (:meth:`Approach.at_eye_level`)."""
     rng = np.random.default_rng([seed, run])
     u = rng.uniform
     length, width = u(*ROOM_LENGTH_M), u(*ROOM_WIDTH_M)
@@ -191,12 +209,13 @@ def draw_approach(seed: int, run: int) -> Approach:
         rug = Rug(u(3.0, length - 2.0), u(-width / 4, width / 4), u(10.0, 80.0), u(1.2, 2.5),
                   u(0.8, 1.6), random_colour(rng, 0.2, 0.6))
     room = replace(room0, decorations=random_decorations(rng, room0, clutter), rug=rug)
-    return Approach(
+    drawn = Approach(
         run=run, room=room, boxes=tuple(boxes), start_x_m=sx, start_y_m=sy, course_deg=course,
         altitude_m=u(*ALTITUDE_M), speed_m_s=u(*SPEED_M_S), hfov_deg=u(*HFOV_DEG),
         obstacle_ahead_m=ahead, obstacle_off_line_m=off, obstacle_rel_yaw_deg=rel,
         obstacle_above_m=u(*OBSTACLE_ABOVE_FLIGHT_M), noise_sigma=u(1.5, 4.0),
         blur_sigma=u(0.4, 0.9), scene_seed=int(rng.integers(0, 2**31 - 1)))
+    return drawn.at_eye_level() if eye_level else drawn
 
 
 def pathtraced_room(ap: Approach, spp: int = 8):
@@ -246,15 +265,18 @@ def _box_clearance_m(box: Box, x: float, y: float) -> float:
 
 
 def first_contact(room: Room, boxes: Sequence[Box], x: float, y: float, altitude_m: float,
-                  radius_m: float = BODY_RADIUS_M) -> str | None:
-    """What a body disc of ``radius_m`` at (x, y), ``altitude_m`` above the floor, touches:
-    ``"wall"``, ``"obstacle"`` (``boxes[0]``), ``"furniture"`` (the other boxes, when the
-    disc is not above them), or None."""
+                  radius_m: float = BODY_RADIUS_M, half_height_m: float = BODY_HALF_HEIGHT_M
+                  ) -> str | None:
+    """What a body, a cylinder of ``radius_m`` reaching ``half_height_m`` above and below
+    (x, y, ``altitude_m`` above the floor), touches: ``"wall"``, ``"obstacle"``
+    (``boxes[0]``), ``"furniture"`` (the other boxes, when the body clears their top), or
+    None. The height matters when a top is near the flight altitude: a body of no height
+    would slip over a box its underside scrapes."""
     if (x - radius_m <= room.x_min or x + radius_m >= room.x_max or y - radius_m <= room.y_min
             or y + radius_m >= room.y_max):
         return "wall"
     for k, box in enumerate(boxes):
-        if altitude_m <= box.height and _box_clearance_m(box, x, y) <= radius_m:
+        if altitude_m - half_height_m <= box.height and _box_clearance_m(box, x, y) <= radius_m:
             return "obstacle" if k == 0 else "furniture"
     return None
 
@@ -305,6 +327,8 @@ class RunResult:
     # decided (range and path distance None when not measured, path inf when clear)
     decisions: list[tuple] = field(default_factory=list)
     detail: str = ""
+    # how far the obstacle's top stood above the camera, lowest and highest over the frames
+    top_above_camera_m: tuple[float, float] = (math.inf, -math.inf)
 
 
 def _policy_config(base: Config, ap: Approach, camera: Camera, focal_given: bool,
@@ -421,6 +445,9 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             pose = controller.pose
             x, y, heading = frame_map.to_room(pose.north_m, pose.east_m, pose.yaw_deg)
             alt = -pose.down_m
+            above = flown.boxes[0].height - alt
+            result.top_above_camera_m = (min(result.top_above_camera_m[0], above),
+                                         max(result.top_above_camera_m[1], above))
             result.path.append((round(x, 3), round(y, 3)))
             result.frames += 1
             result.time_s = controller.clock() - t_start
@@ -572,7 +599,7 @@ def _one(job: tuple) -> tuple[Approach, RunResult]:
     logging.getLogger("mavsdk").setLevel(logging.ERROR)
     kw = dict(kw)
     speed = kw.pop("speed_m_s", None)
-    ap = draw_approach(seed, run)
+    ap = draw_approach(seed, run, eye_level=kw.pop("eye_level", False))
     if speed is not None:
         ap = replace(ap, speed_m_s=speed)
     from companion.control.offboard import AutopilotNotFound
@@ -629,7 +656,7 @@ def _pct(values: Sequence[float], q: float) -> float | None:
 
 
 def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: int,
-              renderer: str = "scene") -> dict:
+              renderer: str = "scene", eye_level: bool = False) -> dict:
     """The figures of a set of runs (the ``--json`` document)."""
     rs = [r for _, r in results]
     n = len(rs)
@@ -644,14 +671,17 @@ def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: 
             "run": r.run, "outcome": r.outcome, "hit": r.hit, "time_s": round(r.time_s, 2),
             "frames": r.frames, "min_clearance_m": round(r.min_clearance_m, 3),
             "max_turn_deg": round(r.max_turn_deg, 1), "altitude_m": round(r.altitude_m, 2),
+            "top_above_camera_m": [round(v, 3) if math.isfinite(v) else None
+                                   for v in r.top_above_camera_m],
             "obstacle_ahead_m": round(ap.obstacle_ahead_m, 2),
             "obstacle_off_line_m": round(ap.obstacle_off_line_m, 2),
             "obstacle_rel_yaw_deg": round(ap.obstacle_rel_yaw_deg, 1),
+            "obstacle_above_m": round(ap.obstacle_above_m, 3),
             "speed_m_s": round(ap.speed_m_s, 2), "hfov_deg": round(ap.hfov_deg, 1),
             "detail": r.detail, "path": r.path, "decisions": r.decisions})
     return {
         "scenario": "approach", "policy": policy, "renderer": renderer, "seed": seed,
-        "runs": n,
+        "eye_level": eye_level, "runs": n,
         "passed": count["passed"], "collisions": count["collision"],
         "timeouts": count["timeout"], "errors": count["error"],
         "collision_free_rate": round((n - count["collision"] - count["error"]) / n, 4)
@@ -679,6 +709,7 @@ def format_report(summary: dict) -> list[str]:
     s = summary
     n = s["runs"]
     drawn = "" if s.get("renderer", "scene") == "scene" else f", {s['renderer']} rooms"
+    drawn += ", obstacle at eye level" if s.get("eye_level") else ""
     out.append(f"policy {s['policy']}{drawn}, {n} runs (seed {s['seed']}): passed {s['passed']}, "
                f"collisions {s['collisions']}, timeouts {s['timeouts']}, errors {s['errors']}; "
                f"collision-free {100 * s['collision_free_rate']:.1f} %, "
@@ -791,12 +822,13 @@ def simulate_approach(args, progress=None) -> int:
             args.runs, args.seed, args.policy, workers=max(1, args.workers), progress=report,
             autopilot_url=args.autopilot, camera_hz=args.camera_hz, width=args.width,
             height=args.height, base=base, focal_given=not args.no_focal,
-            speed_m_s=args.speed, lens_k1=args.lens, renderer=args.renderer, spp=args.spp)
+            speed_m_s=args.speed, lens_k1=args.lens, renderer=args.renderer, spp=args.spp,
+            eye_level=args.eye_level)
     except AutopilotNotFound as exc:
         raise ValueError(str(exc)) from None
     if progress is not None:
         progress(args.runs, args.runs, "")
-    summary = summarize(results, args.policy, args.seed, args.renderer)
+    summary = summarize(results, args.policy, args.seed, args.renderer, args.eye_level)
     for line in format_report(summary):
         print(line)
     options = "" if args.speed is None else f" --speed {args.speed:g}"
@@ -804,6 +836,7 @@ def simulate_approach(args, progress=None) -> int:
     if args.renderer != "scene":
         options += f" --renderer {args.renderer} --spp {args.spp}"
     options += " --no-focal" if args.no_focal else ""
+    options += " --eye-level" if args.eye_level else ""
     print(f"({time.perf_counter() - started:.0f} s; companion sim --scenario approach "
           f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{options})")
     for r in summary["per_run"]:

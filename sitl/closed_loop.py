@@ -357,6 +357,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                          "3 s a frame; needs companion[render])")
     ap.add_argument("--spp", type=int, default=8,
                     help="approach, pathtraced: samples per pixel (default 8)")
+    ap.add_argument("--eye-level", action="store_true",
+                    help="approach: the same runs with the obstacle's top 0.1-0.25 m above "
+                         "the hover altitude, seen nearly edge-on all the way in (furniture "
+                         "at the height the vehicle cruises at)")
     ap.add_argument("--json", metavar="PATH", help="approach: write the figures as JSON")
     ap.add_argument("--config", metavar="PATH", dest="sim_config",
                     help="approach: YAML config for the companion (policy, offboard ...)")
@@ -370,6 +374,8 @@ def simulate(args: argparse.Namespace) -> int:
         return simulate_approach(args)
     if args.renderer != "scene":
         raise ValueError("--renderer pathtraced goes with --scenario approach")
+    if args.eye_level:
+        raise ValueError("--eye-level goes with --scenario approach")
     runs = []
     for eta0 in args.eta0:
         if not -89.0 < eta0 < 89.0:

@@ -45,6 +45,23 @@ def test_every_drawn_obstacle_stands_rotated_in_the_flight_path(run):
     assert ap.room.x_min < end[0] < ap.room.x_max
 
 
+@pytest.mark.parametrize("run", range(6))
+def test_an_eye_level_run_is_the_same_run_with_the_obstacles_top_at_the_flight_altitude(run):
+    regular, eye = draw_approach(7, run), draw_approach(7, run, eye_level=True)
+    assert eye.room == regular.room and eye.boxes == regular.boxes
+    assert eye.altitude_m == regular.altitude_m and eye.hfov_deg == regular.hfov_deg
+    flown = eye.at_altitude(1.1)
+    assert 1.1 + 0.1 <= flown.boxes[0].height <= 1.1 + 0.25
+    # Seen from the start, the top's corners are within a few degrees of the horizon.
+    top = flown.boxes[0].height - 1.1
+    nearest = min(math.hypot(c[0] - eye.start_x_m, c[1] - eye.start_y_m)
+                  for c in flown.boxes[0].footprint())
+    assert math.degrees(math.atan2(top, nearest)) < 7.0
+    # Lifted by PX4's altitude creep in offboard (0.2 m), the body still cannot clear it.
+    x, y = flown.boxes[0].x, flown.boxes[0].y
+    assert first_contact(flown.room, flown.boxes, x, y, 1.1 + 0.2) == "obstacle"
+
+
 def test_first_contact_knows_walls_obstacle_furniture_and_overflight():
     room = Room(x_min=0.0, x_max=10.0, y_min=-3.0, y_max=3.0)
     obstacle = Box(5.0, 0.0, 30.0, 1.0, 0.6, 1.5)
@@ -52,9 +69,10 @@ def test_first_contact_knows_walls_obstacle_furniture_and_overflight():
     boxes = (obstacle, chair)
     assert first_contact(room, boxes, 1.0, 0.0, 1.0) is None
     assert first_contact(room, boxes, 5.0 - 0.5 - BODY_RADIUS_M * 0.9, 0.0, 1.0) == "obstacle"
-    assert first_contact(room, boxes, 5.0, 0.0, 1.6) is None  # above it
+    assert first_contact(room, boxes, 5.0, 0.0, 1.65) is None  # above it
+    assert first_contact(room, boxes, 5.0, 0.0, 1.55) == "obstacle"  # its underside scrapes
     assert first_contact(room, boxes, 2.0, 2.0, 0.5) == "furniture"
-    assert first_contact(room, boxes, 2.0, 2.0, 1.0) is None  # above the chair
+    assert first_contact(room, boxes, 2.0, 2.0, 0.95) is None  # above the chair
     assert first_contact(room, boxes, 0.2, -1.0, 1.0) == "wall"
     assert first_contact(room, boxes, 4.0, 3.0 - BODY_RADIUS_M * 0.9, 1.0) == "wall"
 
@@ -89,6 +107,21 @@ def test_the_turn_rule_fed_the_true_eta_gets_past():
         assert r.outcome == "passed", r
         assert r.min_clearance_m > BODY_RADIUS_M and r.max_turn_deg > 8.0
         assert r.setpoint_ms and r.decision_ms
+
+
+def test_the_pipeline_flies_past_an_obstacle_at_eye_level():
+    # The obstacle's top near the camera's height all the way in: its top edges lie along
+    # the horizon, where they point at the room's VPs as well as at its own. Flying
+    # straight scrapes it, even after the mock's altitude creep in offboard.
+    ap = draw_approach(0, 2, eye_level=True)
+    straight = fly_approach(ap, "none", port=free_udp_port())
+    assert straight.outcome == "collision" and straight.hit == "obstacle", straight
+    r = fly_approach(ap, "paper", port=free_udp_port())
+    assert r.outcome == "passed", r
+    low, high = r.top_above_camera_m
+    assert -0.1 < low <= high < 0.3
+    seen = [d for d in r.decisions if d[2] is not None]
+    assert r.decisions[0][2] is not None and len(seen) >= 3 and r.max_turn_deg > 20.0
 
 
 def test_a_run_starts_to_fly_the_same_way_every_time():
