@@ -89,8 +89,8 @@ def test_the_autopilots_frame_is_mapped_onto_the_start_pose():
     assert heading == pytest.approx(7.0)
 
 
-def _fly(run, policy):
-    return fly_approach(draw_approach(0, run), policy, port=free_udp_port())
+def _fly(run, policy, eye_level=False):
+    return fly_approach(draw_approach(0, run, eye_level), policy, port=free_udp_port())
 
 
 def test_flying_straight_hits_the_obstacle():
@@ -113,10 +113,9 @@ def test_the_pipeline_flies_past_an_obstacle_at_eye_level():
     # The obstacle's top near the camera's height all the way in: its top edges lie along
     # the horizon, where they point at the room's VPs as well as at its own. Flying
     # straight scrapes it, even after the mock's altitude creep in offboard.
-    ap = draw_approach(0, 2, eye_level=True)
-    straight = fly_approach(ap, "none", port=free_udp_port())
+    straight = _fly(2, "none", eye_level=True)
     assert straight.outcome == "collision" and straight.hit == "obstacle", straight
-    r = fly_approach(ap, "paper", port=free_udp_port())
+    r = _fly(2, "paper", eye_level=True)
     assert r.outcome == "passed", r
     low, high = r.top_above_camera_m
     assert -0.1 < low <= high < 0.3
