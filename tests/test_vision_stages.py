@@ -482,6 +482,34 @@ def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 1e-6
 
 
+def test_a_piece_of_the_vertical_edge_is_no_leg_of_its_far_corner():
+    # A box's top corner a little below eye level, one face seen nearly square, the
+    # vertical edge down to the floor. The lowest piece of that edge leans a few degrees,
+    # misses the V3 label and ends at the edge's far end like a leg of C_h. Its line runs
+    # up the edge, through the top corner: met with a top leg it puts an OVP at the corner
+    # itself, on the horizon within tolerance for a corner this near eye level, and at a
+    # right angle to the square face's OVP (the closed loop read η +29.6° for +3°).
+    from companion.vision.obstacles import find_obstacles
+
+    a = np.radians(12.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.3, 1.2, 3.0])  # on the floor, 1.2 m below the camera
+    top = front + [0.0, -0.92, 0.0]  # 0.28 m below the camera, 5° below the horizon
+    b, t, t_u, t_v = _project([front, top, top + 1.5 * u, top + 1.5 * v])
+    lean = np.radians(4.0)
+    piece = b + 30.0 * np.array([np.sin(lean), -np.cos(lean)])
+    segs = np.array([[*t, *t_u], [*t, *t_v], [*t, *(b + (t - b) * 0.2)], [*b, *piece]])
+    labels = np.array([NONE, NONE, V3, NONE])
+    corners = find_corners(segs, labels)
+    found = find_obstacles(segs, corners, _room_layout(), labels == NONE, labels)
+    assert len(found) == 1
+    for ovp in found[0].ovps[:2]:
+        assert np.linalg.norm(to_pixels(ovp) - t) > 10.0
+    dirs = direction_of(found[0].ovps[:2], F, C)
+    for face in (u, v):
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 1e-6
+
+
 def test_a_corner_at_the_foot_of_a_room_edge_takes_no_ovps_on_the_horizon():
     # A rug's corner (or a shadow's) at the foot of a door frame: the bottom corner of a box
     # 35° off the room, as far as its three legs go, but a room edge (the lintel, toward

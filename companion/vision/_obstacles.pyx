@@ -242,15 +242,21 @@ cdef Py_ssize_t partner_legs(double[:, ::1] s, double[:, ::1] lines, double px, 
     ``p_c`` = (px, py): a leg's line must cross the vertical line within
     ``radius_px + leg_gap_frac · edge`` of the far end, on the far half of the edge, and
     the leg must end within ``radius_px`` of that crossing; C_g's own legs are not C_h's.
-    Writes them to ``out`` in order; returns their count."""
+    A leg leaves the edge at 20° or more: a piece of the vertical edge itself that missed
+    the V3 label crosses the edge's line everywhere, and met with a leg of C_g it would put
+    an OVP at C_g itself. Writes them to ``out`` in order; returns their count."""
     cdef double vline[3]
     cdef double q[3]
-    cdef double qx, qy, ax = (ex - px) / edge, ay = (ey - py) / edge
+    cdef double qx, qy, dx, dy, ax = (ex - px) / edge, ay = (ey - py) / edge
     cdef Py_ssize_t j, f, count = 0
     segment_line(px, py, ex, ey, vline)
     for j in range(free_idx.shape[0]):
         f = free_idx[j]
         if f == leg_s or f == leg_n:
+            continue
+        dx = s[f, 2] - s[f, 0]
+        dy = s[f, 3] - s[f, 1]
+        if fabs(dx * ay - dy * ax) < MIN_SIDE * hypot(dx, dy):
             continue
         intersect(&lines[f, 0], vline, q)
         if fabs(q[2]) < 1e-12:
