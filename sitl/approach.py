@@ -241,11 +241,11 @@ def pathtraced_room(ap: Approach, spp: int = 8):
 
 def _draw_frame(renderer: str, scene: Scene, r3, cam: Camera, frame: int,
                 yaw_rate_deg_s: float) -> np.ndarray:
-    """The camera's picture of the run's room: :mod:`sitl.scene`'s, or path-traced
-    (``r3``: :func:`pathtraced_room`) with this frame's noise and the blur of the vehicle's
-    own yaw rate."""
+    """The camera's picture of the run's room, with this frame's sensor noise:
+    :mod:`sitl.scene`'s, or path-traced (``r3``: :func:`pathtraced_room`) with the blur of
+    the vehicle's own yaw rate too."""
     if renderer == "scene":
-        return render_image(scene, cam, supersample=1)
+        return render_image(scene, cam, supersample=1, frame=frame + 1)
     from sitl import pathtraced
 
     look = replace(r3.look, frame=frame + 1, yaw_rate_deg_s=yaw_rate_deg_s)

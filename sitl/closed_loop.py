@@ -1,9 +1,10 @@
 """The paper's loop in simulation (Fig. 6, Fig. 11, Table IV): ``companion sim``.
 
 Every camera tick the renderer draws the room from the mock autopilot's current heading,
-the companion pipeline computes η, Table II turns it into a yaw rate, and the offboard
-controller sends it over real MAVLink (MAVSDK → UDP on 127.0.0.1 → :mod:`sitl.autopilot`),
-which integrates it into the heading the next frame is drawn from. Nothing is stepped by
+with that frame's own sensor noise, the companion pipeline computes η, Table II turns it
+into a yaw rate, and the offboard controller sends it over real MAVLink (MAVSDK → UDP on
+127.0.0.1 → :mod:`sitl.autopilot`), which integrates it into the heading the next frame
+is drawn from. Nothing is stepped by
 hand: the camera, the controller and the autopilot run in real time, as on a vehicle.
 
 The start: a box 30° off the room's axes, ahead of the camera, and the camera turned so
@@ -199,14 +200,15 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
 
     with hovering_autopilot(port) as mock:
         def camera() -> None:
-            in_band = 0
+            in_band = tick = 0
             history = TurnHistory()
             deadline = time.monotonic() + timeout_s
             while time.monotonic() < deadline:
+                tick += 1
                 with mock.physics_paused():  # the camera exposes at once: draw in frozen time
                     heading = mock.yaw_deg
                     image, truth = render(scene, replace(cam0, yaw_deg=cam0.yaw_deg + heading),
-                                          supersample=1)
+                                          supersample=1, frame=tick)
                 t_cap = time.monotonic()
                 est = pipeline(image)
                 eta, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, cfg.policy,

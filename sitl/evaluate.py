@@ -604,7 +604,7 @@ def evaluate_clip(seed: int, clip: int, config: Config | None = None,
     for k, c in enumerate(yaw_sweep(cam, start, start + rate * (frames - 1), frames,
                                     advance_m=float(rng.uniform(0.0, 0.6)))):
         if renderer == "scene":
-            image, truth = render(replace(scene, seed=scene.seed + k), c)
+            image, truth = render(scene, c, frame=k + 1)  # a video's noise, frame by frame
         else:
             # A video's noise is drawn afresh each frame; its textures stay (Look.frame).
             look = replace(r3.look, frame=k + 1, yaw_rate_deg_s=rate * CLIP_FPS)

@@ -414,8 +414,13 @@ def _rays(cam: Camera, scale: int) -> np.ndarray:
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def render_image(scene: Scene, cam: Camera, supersample: int = 2) -> np.ndarray:
-    """The scene as the camera sees it: H×W×3 uint8 BGR, with blur and sensor noise."""
+def render_image(scene: Scene, cam: Camera, supersample: int = 2,
+                 frame: int | None = None) -> np.ndarray:
+    """The scene as the camera sees it: H×W×3 uint8 BGR, with blur and sensor noise.
+
+    ``frame``: the sensor noise of that frame of a video, drawn anew each frame as a
+    camera's is (from ``scene.seed`` and ``frame``); None: the scene's one still picture.
+    """
     dirs = _rays(cam, supersample)
     t, ids, normal = _cast(scene, cam.position, dirs)
     pts = cam.position + t[:, None] * dirs
@@ -426,7 +431,7 @@ def render_image(scene: Scene, cam: Camera, supersample: int = 2) -> np.ndarray:
     if scene.blur_sigma > 0:
         img = cv2.GaussianBlur(img, (0, 0), scene.blur_sigma)
     if scene.noise_sigma > 0:
-        rng = np.random.default_rng(scene.seed)
+        rng = np.random.default_rng(scene.seed if frame is None else [scene.seed, frame])
         img += rng.normal(0.0, scene.noise_sigma, img.shape).astype(np.float32)
     return np.clip(img, 0, 255).astype(np.uint8)
 
@@ -544,9 +549,11 @@ def scene_truth(scene: Scene, cam: Camera, min_edge_px: float = 15.0) -> SceneTr
     )
 
 
-def render(scene: Scene, cam: Camera, supersample: int = 2) -> tuple[np.ndarray, SceneTruth]:
-    """Image (H×W×3 uint8 BGR) and :class:`SceneTruth` of ``scene`` seen by ``cam``."""
-    return render_image(scene, cam, supersample), scene_truth(scene, cam)
+def render(scene: Scene, cam: Camera, supersample: int = 2,
+           frame: int | None = None) -> tuple[np.ndarray, SceneTruth]:
+    """Image (H×W×3 uint8 BGR) and :class:`SceneTruth` of ``scene`` seen by ``cam``
+    (``frame``: see :func:`render_image`)."""
+    return render_image(scene, cam, supersample, frame), scene_truth(scene, cam)
 
 
 def _mirror_vp(vp: list[float], width: int) -> list[float]:
@@ -809,7 +816,7 @@ def write_video(
         )
         stack.callback(lambda: writer is not None and writer.release())
         for i, cam in enumerate(cameras):
-            img, truth = render(replace(scene, seed=scene.seed + i), cam)
+            img, truth = render(scene, cam, frame=i + 1)
             if writer is None:
                 writer = cv2.VideoWriter(
                     str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (cam.width, cam.height)

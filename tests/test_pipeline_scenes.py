@@ -9,7 +9,7 @@ from companion.config import Config
 from companion.vision.pipeline import STAGES, Pipeline
 from sitl.evaluate import EvalReport, SceneResult, evaluate_scene
 from sitl.sample import sample_scene
-from sitl.scene import Box, Camera, Scene, mirror, render, yaw_sweep
+from sitl.scene import Box, Camera, Scene, mirror, render, render_image, yaw_sweep
 
 
 def _pipeline(focal):
@@ -125,6 +125,23 @@ def test_renderer_truth_eta_follows_eq10():
     truth = render(scene, cam)[1]
     assert truth.obstacles[0].eta_deg == pytest.approx(20.0, abs=1e-6)
     assert truth.focal_px == pytest.approx(320.0)
+
+
+def test_a_videos_sensor_noise_is_new_each_frame_and_the_room_is_not():
+    # A camera's noise is drawn anew each exposure; a pattern fixed to the scene would
+    # make a hovering vehicle see one misread frame over and over (the closed loop did).
+    cam = Camera(width=160, height=120, hfov_deg=90.0, x=0.0, y=0.0, yaw_deg=0.0)
+    scene = Scene(boxes=(Box(4.0, 0.0, 20.0, 1.0, 1.0, 1.0),), noise_sigma=3.0, seed=5)
+    still = render_image(scene, cam, supersample=1)
+    assert np.array_equal(still, render_image(scene, cam, supersample=1))
+    one, two = (render_image(scene, cam, supersample=1, frame=k).astype(float) for k in (1, 2))
+    assert np.array_equal(one, render_image(scene, cam, supersample=1, frame=1))
+    diff = (one - two)[(one > 10) & (one < 245) & (two > 10) & (two < 245)]
+    assert abs(diff.mean()) < 0.2 and diff.std() == pytest.approx(3.0 * np.sqrt(2), rel=0.1)
+    # The same room: without noise the frames are one picture.
+    quiet = replace(scene, noise_sigma=0.0)
+    assert np.array_equal(render_image(quiet, cam, supersample=1, frame=1),
+                          render_image(quiet, cam, supersample=1, frame=2))
 
 
 def _same_up_to_sign(a, b):
