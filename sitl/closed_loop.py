@@ -4,8 +4,8 @@ Every camera tick the renderer draws the room from the mock autopilot's current 
 with that frame's own sensor noise, the companion pipeline computes η, Table II turns it
 into a yaw rate, and the offboard controller sends it over real MAVLink (MAVSDK → UDP on
 127.0.0.1 → :mod:`sitl.autopilot`), which integrates it into the heading the next frame
-is drawn from. Nothing is stepped by
-hand: the camera, the controller and the autopilot run in real time, as on a vehicle.
+is drawn from. Nothing is stepped by hand: the camera, the controller and the autopilot
+run in real time, as on a vehicle.
 
 The start: a box 30° off the room's axes, ahead of the camera, and the camera turned so
 that η = ``eta0_deg``. Since M is the obstacle VP nearest the image centre (eq. 9), its
