@@ -247,16 +247,14 @@ cdef Py_ssize_t partner_legs(double[:, ::1] s, double[:, ::1] lines, double px, 
     an OVP at C_g itself. Writes them to ``out`` in order; returns their count."""
     cdef double vline[3]
     cdef double q[3]
-    cdef double qx, qy, dx, dy, ax = (ex - px) / edge, ay = (ey - py) / edge
+    cdef double qx, qy, ax = (ex - px) / edge, ay = (ey - py) / edge
     cdef Py_ssize_t j, f, count = 0
     segment_line(px, py, ex, ey, vline)
     for j in range(free_idx.shape[0]):
         f = free_idx[j]
         if f == leg_s or f == leg_n:
             continue
-        dx = s[f, 2] - s[f, 0]
-        dy = s[f, 3] - s[f, 1]
-        if fabs(dx * ay - dy * ax) < MIN_SIDE * hypot(dx, dy):
+        if fabs(_side(s, f, ex, ey, ax, ay)) < MIN_SIDE:
             continue
         intersect(&lines[f, 0], vline, q)
         if fabs(q[2]) < 1e-12:
