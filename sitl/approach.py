@@ -353,7 +353,13 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     room path-traced at ``spp`` samples per pixel, :func:`pathtraced_room`; its own lens)."""
     from companion.control.offboard import OffboardController
     from companion.vision.pipeline import Pipeline
-    from sitl.closed_loop import fly_alongside
+    from sitl.closed_loop import (
+        EXPOSURE_LEAD_S,
+        fly_alongside,
+        step_vehicle,
+        wait_engaged,
+        wait_sent,
+    )
 
     if policy not in POLICIES:
         raise ValueError(f"--policy {policy}: must be one of {', '.join(POLICIES)}")
@@ -385,26 +391,11 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
 
     def advance() -> None:
         """One camera period of vehicle time: lock-step the mock, else wait it out."""
-        if mock is None:
-            next_frame[0] = max(next_frame[0] + period_s, time.monotonic())
-            time.sleep(max(0.0, next_frame[0] - time.monotonic()))
+        if mock is not None:
+            step_vehicle(mock, controller, period_s)
             return
-        if controller.pose is None:  # MAVSDK not listening yet: nothing to wait for
-            mock.advance(period_s)
-            return
-        n = controller.pose.position_updates
-        target_us = int(round(mock.advance(period_s) * 1e6)) - 1000
-        t0 = time.monotonic()
-        resent = t0
-        while time.monotonic() < t0 + 5.0:
-            pose = controller.pose
-            if pose is not None and pose.position_updates > n and pose.attitude_t_us >= target_us:
-                return
-            if time.monotonic() > resent + 0.25:  # MAVSDK can drop a callback under load
-                mock.send_pose()
-                resent = time.monotonic()
-            time.sleep(0.0005)
-        raise TimeoutError("no telemetry from the autopilot after a lock-step")
+        next_frame[0] = max(next_frame[0] + period_s, time.monotonic())
+        time.sleep(max(0.0, next_frame[0] - time.monotonic()))
 
     def hover_pose():
         """Wait until the vehicle hovers after takeoff (its altitude steady to 2 cm for a
@@ -498,13 +489,11 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                                      _round(range_m), _round(path_m)))
             engaging = mock is not None and controller.state.name != "active"
             if engaging:
-                # Engaging offboard is MAVSDK's and the autopilot's real-time exchange.
-                # The simulated clock waits for it, so that how long it takes in real
-                # time does not decide at which frame the vehicle starts to act.
-                _wait_engaged(controller, ticks, session_over)
+                wait_engaged(controller, ticks, session_over)
             if controller.state.name == "active":
-                # The frame that engaged waited for the exchange: not a latency.
-                _wait_sent(controller, mock, t_frame, t_wall, result, record=not engaging)
+                sent = wait_sent(controller, mock, t_frame)
+                if sent is not None and not engaging:  # the engaging frame waited: no latency
+                    result.setpoint_ms.append((sent - t_wall) * 1e3)
             elif mock is not None:
                 time.sleep(max(0.0, period_s - (time.monotonic() - t_wall)))
             advance()
@@ -539,42 +528,6 @@ def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray
 def _round(x: float | None) -> float | str | None:
     """A distance for the JSON: 2 decimals, None as is, inf as the string "inf"."""
     return None if x is None else ("inf" if math.isinf(x) else round(x, 2))
-
-
-EXPOSURE_LEAD_S = 0.001
-"""s: a frame's timestamp precedes the clock reading at which it is decided on"""
-
-ENGAGE_WAIT_S = 5.0
-"""s of real time the lock-stepped clock waits for offboard to engage (MAVSDK gives up on
-a mode switch the heartbeat does not show within about 3 s)"""
-
-
-def _wait_engaged(controller, ticks: int, session_over: threading.Event) -> None:
-    """Lock-stepped, with the simulated clock held: until the supervisor has ticked on the
-    frame's decision (``ticks``: its tick count before the decision) and any engagement
-    that began is over, either way, or :data:`ENGAGE_WAIT_S` of real time passed."""
-    t0 = time.monotonic()
-    while not session_over.is_set() and time.monotonic() - t0 < ENGAGE_WAIT_S:
-        name = controller.state.name
-        if name == "active" or (name != "engaging" and controller.ticks_done > ticks):
-            return
-        time.sleep(0.001)
-
-
-def _wait_sent(controller, mock, t_frame: float, t_wall: float, result: RunResult,
-               record: bool = True) -> None:
-    """Until the frame's decision is in a setpoint (and, lock-stepped, at the mock):
-    records the frame → setpoint latency (with ``record``)."""
-    deadline = time.monotonic() + 2.0
-    while time.monotonic() < deadline:
-        sent = controller.sent
-        arrived = sent is not None and sent[0] == t_frame and (
-            mock is None or (mock.setpoints and mock.setpoints[-1].t_s >= sent[1]))
-        if arrived:
-            if record:
-                result.setpoint_ms.append((sent[1] - t_wall) * 1e3)
-            return
-        time.sleep(0.0002)
 
 
 def _guarded(camera: Callable[[], None], result: RunResult) -> Callable[[], None]:

@@ -215,7 +215,6 @@ class MockAutopilot:
         self.mode_changes: list[tuple[float, str, str]] = []  # (t, mode name, why)
         self.acks: list[tuple[float, int, int]] = []  # (t, command, result)
         self.on_event: Callable[[str], None] = lambda text: None
-        self._paused = False
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> MockAutopilot:
@@ -289,21 +288,6 @@ class MockAutopilot:
         with self._lock:
             for mid in _POSE_STREAMS:
                 self._send(self._telemetry(mid))
-
-    @contextlib.contextmanager
-    def physics_paused(self):
-        """Stop the vehicle's motion (not the link, modes or failsafes) while inside.
-
-        For a simulated camera that takes real time to draw a frame a real camera exposes
-        at once: the closed loop draws with the vehicle held still.
-        """
-        with self._lock:
-            self._paused = True
-        try:
-            yield
-        finally:
-            with self._lock:
-                self._paused = False
 
     def pilot_set_mode(self, mode: Px4Mode) -> None:
         """The pilot flips a mode switch on the RC: always wins, no stream needed."""
@@ -412,8 +396,6 @@ class MockAutopilot:
         if v.mode == OFFBOARD and sp is not None and now - sp.sim_t_s > p.com_of_loss_t_s:
             self._set_mode(p.offboard_loss_mode, "offboard setpoints lost")
             self._statustext(mavlink.MAV_SEVERITY_CRITICAL, "Failsafe: offboard lost")
-        if self._paused:
-            return
         cmd_v = (0.0, 0.0, 0.0)
         cmd_yaw_rate = 0.0
         if not v.armed or not v.in_air:

@@ -4,8 +4,11 @@ Every camera tick the renderer draws the room from the mock autopilot's current 
 with that frame's own sensor noise, the companion pipeline computes η, Table II turns it
 into a yaw rate, and the offboard controller sends it over real MAVLink (MAVSDK → UDP on
 127.0.0.1 → :mod:`sitl.autopilot`), which integrates it into the heading the next frame
-is drawn from. Nothing is stepped by hand: the camera, the controller and the autopilot
-run in real time, as on a vehicle.
+is drawn from. The vehicle moves in lock-step with the camera, as in
+:mod:`sitl.approach`: the autopilot flies one camera period of simulated time per frame
+and the companion runs on that clock, so the machine's speed decides nothing (drawing a
+frame costs no flight time, as a real camera's exposure does not) and a start flown again
+flies the same way. The MAVLink exchange itself (setpoints, modes, telemetry) is real.
 
 The start: a box 30° off the room's axes, ahead of the camera, and the camera turned so
 that η = ``eta0_deg``. Since M is the obstacle VP nearest the image centre (eq. 9), its
@@ -176,64 +179,143 @@ def fly_alongside(controller: OffboardController, camera: Callable[[], None],
     asyncio.run(fly())
 
 
+EXPOSURE_LEAD_S = 0.001
+"""s: a frame's timestamp precedes the clock reading at which it is decided on"""
+
+ENGAGE_WAIT_S = 5.0
+"""s of real time the lock-stepped clock waits for offboard to engage (MAVSDK gives up on
+a mode switch the heartbeat does not show within about 3 s)"""
+
+
+def step_vehicle(mock, controller: OffboardController, period_s: float) -> None:
+    """Lock-step: fly ``mock`` one camera period of simulated time, then wait until MAVSDK
+    has delivered the pose it sent at the new time (asked for again if a callback was
+    dropped), so the next frame is drawn and decided on where the vehicle now is."""
+    if controller.pose is None:  # MAVSDK not listening yet: nothing to wait for
+        mock.advance(period_s)
+        return
+    n = controller.pose.position_updates
+    target_us = int(round(mock.advance(period_s) * 1e6)) - 1000
+    t0 = time.monotonic()
+    resent = t0
+    while time.monotonic() < t0 + 5.0:
+        pose = controller.pose
+        if pose is not None and pose.position_updates > n and pose.attitude_t_us >= target_us:
+            return
+        if time.monotonic() > resent + 0.25:  # MAVSDK can drop a callback under load
+            mock.send_pose()
+            resent = time.monotonic()
+        time.sleep(0.0005)
+    raise TimeoutError("no telemetry from the autopilot after a lock-step")
+
+
+def wait_engaged(controller: OffboardController, ticks: int,
+                 session_over: threading.Event) -> None:
+    """Lock-stepped, with the simulated clock held: until the supervisor has ticked on the
+    frame's decision (``ticks``: its tick count before the decision) and any engagement
+    that began is over, either way, or :data:`ENGAGE_WAIT_S` of real time passed.
+
+    Engaging offboard is MAVSDK's and the autopilot's real-time exchange; holding the
+    clock meanwhile makes the vehicle start to act at the same frame however long it takes.
+    """
+    t0 = time.monotonic()
+    while not session_over.is_set() and time.monotonic() - t0 < ENGAGE_WAIT_S:
+        name = controller.state.name
+        if name == "active" or (name != "engaging" and controller.ticks_done > ticks):
+            return
+        time.sleep(0.001)
+
+
+def wait_sent(controller: OffboardController, mock, t_frame: float) -> float | None:
+    """Until the decision on the frame taken at ``t_frame`` is in a setpoint (and, with a
+    ``mock``, has reached it), at most 2 s: the ``time.monotonic()`` it was sent, or None."""
+    deadline = time.monotonic() + 2.0
+    while time.monotonic() < deadline:
+        sent = controller.sent
+        if sent is not None and sent[0] == t_frame and (
+                mock is None or (mock.setpoints and mock.setpoints[-1].t_s >= sent[1])):
+            return sent[1]
+        time.sleep(0.0002)
+    return None
+
+
 def _true_eta_deg(truth, depth_px: float) -> float:
     m = truth.obstacles[0].m_px
     return math.degrees(math.atan2(m[0], depth_px)) if m is not None else math.nan
 
 
 def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int = 480,
-                    max_frames: int = 80, settle_frames: int = 10, timeout_s: float = 60.0,
+                    max_frames: int = 80, settle_frames: int = 10, timeout_s: float = 120.0,
                     frame_period_s: float = 0.2, config: Config | None = None) -> LoopRun:
     """Fly one start to convergence (``settle_frames`` frames in the deadband) or to
     ``max_frames`` active frames; the mock autopilot listens on 127.0.0.1:``port``.
 
     The camera delivers a frame every ``frame_period_s`` of vehicle time (5 frames/s by
-    default, a slow companion board); drawing it takes no vehicle time.
+    default, a slow companion board). The vehicle moves in lock-step with it: each frame is
+    drawn and decided on where the vehicle is, its setpoint reaches the autopilot, and the
+    autopilot then flies one frame period. ``timeout_s`` bounds the run in real time.
     """
     scene, cam0, depth = loop_scene(eta0_deg, width, height)
     cfg = loop_config(cam0, depth, port, config)
     pipeline = Pipeline(cfg)
-    controller = OffboardController(cfg)
     deadband = cfg.policy.deadband_deg
     frames: list[LoopFrame] = []
     t_first: list[float] = []
+    session_over = threading.Event()
 
-    with hovering_autopilot(port) as mock:
+    with hovering_autopilot(port, lockstep=True) as mock:
+        controller = OffboardController(cfg, clock=lambda: mock.sim_time_s)
+
         def camera() -> None:
             in_band = tick = 0
             history = TurnHistory()
             deadline = time.monotonic() + timeout_s
-            while time.monotonic() < deadline:
+            # The first frame once the companion has heard the hovering vehicle for a
+            # second: how long MAVSDK takes to connect in real time decides nothing.
+            heard_at = None
+            while time.monotonic() < deadline and not session_over.is_set():
+                step_vehicle(mock, controller, frame_period_s)
+                if controller.pose is None or not controller.connected:
+                    continue
+                heard_at = mock.sim_time_s if heard_at is None else heard_at
+                if mock.sim_time_s >= heard_at + 1.0:
+                    break
+            while time.monotonic() < deadline and not session_over.is_set():
                 tick += 1
-                with mock.physics_paused():  # the camera exposes at once: draw in frozen time
-                    heading = mock.yaw_deg
-                    image, truth = render(scene, replace(cam0, yaw_deg=cam0.yaw_deg + heading),
-                                          supersample=1, frame=tick)
-                t_cap = time.monotonic()
+                heading = mock.yaw_deg
+                image, truth = render(scene, replace(cam0, yaw_deg=cam0.yaw_deg + heading),
+                                      supersample=1, frame=tick)
                 est = pipeline(image)
                 eta, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, cfg.policy,
                                                  history, est.scene_understood)
-                controller.submit(cmd, eta, t_s=t_cap)
-                time.sleep(max(0.0, t_cap + frame_period_s - time.monotonic()))
+                t_frame = controller.clock() - EXPOSURE_LEAD_S
+                ticks = controller.ticks_done
+                controller.submit(cmd, eta, t_s=t_frame)
                 if controller.state.name != "active":
-                    if t_first:  # released after it was active: the run is over
-                        break
-                    continue
-                if not t_first:
-                    t_first.append(t_cap)
-                row = LoopFrame(
-                    frame=len(frames) + 1, t_s=t_cap - t_first[0], heading_deg=heading,
-                    m_x_px=None if est.m_px is None else est.m_px[0], eta_deg=est.eta_deg,
-                    true_eta_deg=_true_eta_deg(truth, depth), action=cmd.action,
-                    yaw_rate_deg_s=cmd.yaw_rate_deg_s, latency_ms=est.latency_ms)
-                frames.append(row)
-                in_band = in_band + 1 if row.action == "forward" else 0
-                if in_band >= settle_frames or len(frames) >= max_frames:
+                    wait_engaged(controller, ticks, session_over)
+                active = controller.state.name == "active"
+                if active:
+                    wait_sent(controller, mock, t_frame)
+                elif t_first:  # released after it was active: the run is over
                     break
+                if active:
+                    if not t_first:
+                        t_first.append(t_frame)
+                    row = LoopFrame(
+                        frame=len(frames) + 1, t_s=t_frame - t_first[0], heading_deg=heading,
+                        m_x_px=None if est.m_px is None else est.m_px[0], eta_deg=est.eta_deg,
+                        true_eta_deg=_true_eta_deg(truth, depth), action=cmd.action,
+                        yaw_rate_deg_s=cmd.yaw_rate_deg_s, latency_ms=est.latency_ms)
+                    frames.append(row)
+                    in_band = in_band + 1 if row.action == "forward" else 0
+                    if in_band >= settle_frames or len(frames) >= max_frames:
+                        break
+                step_vehicle(mock, controller, frame_period_s)
 
-        fly_alongside(controller, camera)
+        fly_alongside(controller, camera, session_over=session_over)
         t0 = t_first[0] if t_first else 0.0
-        setpoints = [(s.t_s - t0, s.yaw_rate_deg_s) for s in mock.setpoints if s.t_s >= t0]
+        setpoints = [(s.sim_t_s - t0, s.yaw_rate_deg_s) for s in mock.setpoints
+                     if s.sim_t_s >= t0]
     return _score(eta0_deg, deadband, frames, setpoints, controller.events)
 
 

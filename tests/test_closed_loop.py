@@ -1,5 +1,5 @@
 """The paper's loop (Fig. 6, Table IV) closed through real MAVLink: renderer → pipeline →
-Table II → MAVSDK offboard → mock PX4 → heading → renderer. Real time, one free port each."""
+Table II → MAVSDK offboard → mock PX4 → heading → renderer. Lock-stepped, one free port each."""
 
 import math
 
