@@ -815,6 +815,32 @@ def test_a_face_whose_bottom_edge_is_a_room_edge_is_no_table():
     assert found(np.vstack([segs, bottom]), np.append(labels, V1)) == []
 
 
+def test_a_top_seen_front_on_takes_its_yaw_from_its_receding_edges():
+    # A box's top seen from above nearly front-on (10° off the view, 0.45 m below the
+    # camera): its front edge crosses the horizon far out, so a pixel of error at one end
+    # of it moves the other OVP, M, by degrees. The top's receding edge at its left end
+    # (the right one not found) points at M directly; fitted with it, M stays near.
+    from companion.vision.obstacles import find_obstacles
+
+    segs, u, v = _table_from_the_front(yaw_deg=10.0)
+    segs[0, 3] += 1.0  # the front edge's right end found a pixel low
+    left = np.array([-0.7, 0.45, 3.0])
+    receding = [[*_project([left])[0], *_project([left + 0.6 * v])[0]]]  # at one end
+    labels = np.array([NONE, V3, V3])
+
+    def m_error_deg(segs, labels):
+        found = find_obstacles(segs, find_corners(segs, labels), _room_layout(),
+                               labels == NONE, labels)
+        assert len(found) == 1
+        dirs = direction_of(found[0].ovps[:2], F, C)
+        return angle_between_directions_deg(dirs, v[None, :]).min()
+
+    alone = m_error_deg(segs, labels)
+    assert alone > 2.0  # the premise: the front edge alone fixes M poorly
+    with_top = m_error_deg(np.vstack([segs, receding]), np.append(labels, NONE))
+    assert with_top < 0.6 * alone
+
+
 def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
     from companion.vision.corners import table1_labels
 

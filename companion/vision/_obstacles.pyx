@@ -1101,6 +1101,32 @@ cdef bint room_edge_under(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1]
     return False
 
 
+cdef void receding_top_legs(Frame* fr, Params* p, double[:, ::1] s, Py_ssize_t a,
+                            const double* o, Py_ssize_t[::1] free_idx,
+                            Hypothesis* h) noexcept:
+    """Add to ``h.legs`` (up to its four) the free segments that leave an end of the top
+    edge ``a`` (within ``radius_px``) at ``MIN_SIDE`` or more from it (``o``: its OVP),
+    toward the horizon and ending below it: the top's receding edges, seen from above."""
+    cdef Py_ssize_t j, b, e
+    cdef double ex, ey, far_x, far_y
+    for j in range(free_idx.shape[0]):
+        b = free_idx[j]
+        if b == a or h.nlegs >= 4 or vp_sin(s[b, 0], s[b, 1], s[b, 2], s[b, 3], o) <= MIN_SIDE:
+            continue
+        for e in range(2):
+            ex, ey = s[a, 2 * e], s[a, 2 * e + 1]
+            if hypot(s[b, 0] - ex, s[b, 1] - ey) <= p.radius_px:
+                far_x, far_y = s[b, 2], s[b, 3]
+            elif hypot(s[b, 2] - ex, s[b, 3] - ey) <= p.radius_px:
+                far_x, far_y = s[b, 0], s[b, 1]
+            else:
+                continue
+            if 0 < below_horizon(fr, far_x, far_y) < below_horizon(fr, ex, ey):
+                h.legs[h.nlegs] = b
+                h.nlegs += 1
+                break
+
+
 cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                         double[::1] lengths, Py_ssize_t[::1] free_idx, list chains,
                         Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
@@ -1115,11 +1141,16 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
     and V2. A vertical edge hangs from it when its upper end is within ``radius_px`` of
     its line and between its ends; two or more must, one on each side of its middle (the
     legs of one top, not one edge twice). No room edge may join two of their feet
-    (:func:`room_edge_under`)."""
+    (:func:`room_edge_under`). Where the top's receding edges show at its ends
+    (:func:`receding_top_legs`), both OVPs are fitted to them and the top edge as one
+    box's yaw (:func:`box_ovps_fit`), which the receding edges fix well where the top
+    edge's far crossing does not."""
     cdef double o[3]
     cdef double d1[3]
     cdef double d2[3]
     cdef double ux, uy, length, t, off, lo, hi, tallest
+    cdef double o1[3]
+    cdef double o2[3]
     cdef Py_ssize_t i, a, k
     cdef Hypothesis* h
     if not chains or not room_vouches_for_focal(fr, p):
@@ -1163,6 +1194,18 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
         set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
         h.legs[0] = a
         h.nlegs = 1
+        receding_top_legs(fr, p, s, a, o, free_idx, h)
+        if h.nlegs > 1:
+            # The top edge's far crossing fixes the other OVP poorly when the face is seen
+            # nearly front-on (about 4° of bearing per pixel in the closed loop's room):
+            # both OVPs are fitted as one box's yaw to the top edge and the receding ones.
+            pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+            if intersect(&lines[h.legs[1], 0], fr.horizon, o2) and box_ovps_fit(
+                    fr, s, lines, [h.legs[k] for k in range(h.nlegs)], sin(radians(3.0)),
+                    o1, o2):
+                direction_of(fr, o1, d1)
+                direction_of(fr, o2, d2)
+                set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
         h.points[0], h.points[1] = top_lo
         h.points[2], h.points[3] = top_hi
         h.npoints = 2
