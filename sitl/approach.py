@@ -353,13 +353,7 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
     room path-traced at ``spp`` samples per pixel, :func:`pathtraced_room`; its own lens)."""
     from companion.control.offboard import OffboardController
     from companion.vision.pipeline import Pipeline
-    from sitl.closed_loop import (
-        EXPOSURE_LEAD_S,
-        fly_alongside,
-        step_vehicle,
-        wait_engaged,
-        wait_sent,
-    )
+    from sitl.closed_loop import fly_alongside, step_vehicle, submit_frame
 
     if policy not in POLICIES:
         raise ValueError(f"--policy {policy}: must be one of {', '.join(POLICIES)}")
@@ -476,22 +470,14 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                                                                   image)
             eta, cmd, history = decide_frame(seen, tracked, cfg.policy, history, understood,
                                              range_m)
-            # Exposed a moment before it is decided on; in lock-step the offset also keeps
-            # a frame's age off the supervisor's thresholds (whole numbers of camera
-            # periods), where the clock's rounding would decide the comparison.
-            t_frame = controller.clock() - EXPOSURE_LEAD_S
-            t_wall = time.monotonic()
             result.decision_ms.append((time.perf_counter() - t0) * 1e3)
-            ticks = controller.ticks_done
-            controller.submit(cmd, eta, t_s=t_frame, range_m=range_m, path_m=path_m)
+            t_wall = time.monotonic()
+            _, engaging, sent = submit_frame(controller, mock, cmd, eta, session_over,
+                                             range_m=range_m, path_m=path_m)
             result.decisions.append((round(result.time_s, 2), round(heading, 2),
                                      None if eta is None else round(eta, 2), cmd.action,
                                      _round(range_m), _round(path_m)))
-            engaging = mock is not None and controller.state.name != "active"
-            if engaging:
-                wait_engaged(controller, ticks, session_over)
             if controller.state.name == "active":
-                sent = wait_sent(controller, mock, t_frame)
                 if sent is not None and not engaging:  # the engaging frame waited: no latency
                     result.setpoint_ms.append((sent - t_wall) * 1e3)
             elif mock is not None:

@@ -209,8 +209,8 @@ def step_vehicle(mock, controller: OffboardController, period_s: float) -> None:
     raise TimeoutError("no telemetry from the autopilot after a lock-step")
 
 
-def wait_engaged(controller: OffboardController, ticks: int,
-                 session_over: threading.Event) -> None:
+def _wait_engaged(controller: OffboardController, ticks: int,
+                  session_over: threading.Event) -> None:
     """Lock-stepped, with the simulated clock held: until the supervisor has ticked on the
     frame's decision (``ticks``: its tick count before the decision) and any engagement
     that began is over, either way, or :data:`ENGAGE_WAIT_S` of real time passed.
@@ -226,7 +226,7 @@ def wait_engaged(controller: OffboardController, ticks: int,
         time.sleep(0.001)
 
 
-def wait_sent(controller: OffboardController, mock, t_frame: float) -> float | None:
+def _wait_sent(controller: OffboardController, mock, t_frame: float) -> float | None:
     """Until the decision on the frame taken at ``t_frame`` is in a setpoint (and, with a
     ``mock``, has reached it), at most 2 s: the ``time.monotonic()`` it was sent, or None."""
     deadline = time.monotonic() + 2.0
@@ -237,6 +237,28 @@ def wait_sent(controller: OffboardController, mock, t_frame: float) -> float | N
             return sent[1]
         time.sleep(0.0002)
     return None
+
+
+def submit_frame(controller: OffboardController, mock, command, eta_deg: float | None,
+                 session_over: threading.Event, **fields) -> tuple[float, bool, float | None]:
+    """Hand one frame's decision to ``controller`` (``fields``: further
+    :meth:`~companion.control.offboard.OffboardController.submit` arguments), stamped
+    :data:`EXPOSURE_LEAD_S` before now on its clock: the frame was exposed a moment before
+    it is decided on, and in lock-step the offset also keeps a frame's age off the
+    supervisor's thresholds (whole numbers of camera periods), where the clock's rounding
+    would decide the comparison. Lock-stepped (``mock`` given), the clock is held while
+    offboard engages; once active, until the decision is in a setpoint (at the mock).
+
+    Returns the frame's time on the controller's clock, whether it waited for offboard to
+    engage, and the ``time.monotonic()`` its setpoint was sent (None: not seen sent)."""
+    t_frame = controller.clock() - EXPOSURE_LEAD_S
+    ticks = controller.ticks_done
+    controller.submit(command, eta_deg, t_s=t_frame, **fields)
+    engaging = mock is not None and controller.state.name != "active"
+    if engaging:
+        _wait_engaged(controller, ticks, session_over)
+    sent = _wait_sent(controller, mock, t_frame) if controller.state.name == "active" else None
+    return t_frame, engaging, sent
 
 
 def _true_eta_deg(truth, depth_px: float) -> float:
@@ -288,17 +310,8 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
                 est = pipeline(image)
                 eta, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, cfg.policy,
                                                  history, est.scene_understood)
-                t_frame = controller.clock() - EXPOSURE_LEAD_S
-                ticks = controller.ticks_done
-                controller.submit(cmd, eta, t_s=t_frame)
-                if controller.state.name != "active":
-                    wait_engaged(controller, ticks, session_over)
-                active = controller.state.name == "active"
-                if active:
-                    wait_sent(controller, mock, t_frame)
-                elif t_first:  # released after it was active: the run is over
-                    break
-                if active:
+                t_frame, _, _ = submit_frame(controller, mock, cmd, eta, session_over)
+                if controller.state.name == "active":
                     if not t_first:
                         t_first.append(t_frame)
                     row = LoopFrame(
@@ -310,6 +323,8 @@ def run_closed_loop(eta0_deg: float, port: int, *, width: int = 640, height: int
                     in_band = in_band + 1 if row.action == "forward" else 0
                     if in_band >= settle_frames or len(frames) >= max_frames:
                         break
+                elif t_first:  # released after it was active: the run is over
+                    break
                 step_vehicle(mock, controller, frame_period_s)
 
         fly_alongside(controller, camera, session_over=session_over)
