@@ -1107,21 +1107,18 @@ cdef void receding_top_legs(Frame* fr, Params* p, double[:, ::1] s, Py_ssize_t a
     """Add to ``h.legs`` (up to its four) the free segments that leave an end of the top
     edge ``a`` (within ``radius_px``) at ``MIN_SIDE`` or more from it (``o``: its OVP),
     toward the horizon and ending below it: the top's receding edges, seen from above."""
-    cdef Py_ssize_t j, b, e
-    cdef double ex, ey, far_x, far_y
+    cdef Py_ssize_t j, b, e, k
+    cdef double ex, ey
     for j in range(free_idx.shape[0]):
         b = free_idx[j]
         if b == a or h.nlegs >= 4 or vp_sin(s[b, 0], s[b, 1], s[b, 2], s[b, 3], o) <= MIN_SIDE:
             continue
         for e in range(2):
             ex, ey = s[a, 2 * e], s[a, 2 * e + 1]
-            if hypot(s[b, 0] - ex, s[b, 1] - ey) <= p.radius_px:
-                far_x, far_y = s[b, 2], s[b, 3]
-            elif hypot(s[b, 2] - ex, s[b, 3] - ey) <= p.radius_px:
-                far_x, far_y = s[b, 0], s[b, 1]
-            else:
+            if end_distance(s, b, ex, ey) > p.radius_px:
                 continue
-            if 0 < below_horizon(fr, far_x, far_y) < below_horizon(fr, ex, ey):
+            k = 2 if hypot(s[b, 0] - ex, s[b, 1] - ey) < hypot(s[b, 2] - ex, s[b, 3] - ey) else 0
+            if 0 < below_horizon(fr, s[b, k], s[b, k + 1]) < below_horizon(fr, ex, ey):
                 h.legs[h.nlegs] = b
                 h.nlegs += 1
                 break
