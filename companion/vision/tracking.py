@@ -6,9 +6,13 @@ room's axes, ``rel = wrap90(η − η_room)``, where ``η_room`` is eq. 10 appli
 VP (V1 or V2) and ``wrap90`` folds an angle into (−45°, 45°] (a box's four faces and a
 room's four walls are each 90° apart). The track keeps that angle, so that
 
-- a new detection belongs to the track when its ``rel`` agrees within ``gate_deg``;
-- η is predicted, as ``rel + η_room`` taken modulo 90° nearest the last η, in frames
-  where the detection drops out (up to ``max_missed`` of them);
+- a new detection belongs to the track when its ``rel`` agrees within ``gate_deg``, and
+  moves the track's ``rel`` by ``smoothing`` of the difference;
+- the tracked η is ``rel + η_room`` taken modulo 90° nearest the last η, in every frame:
+  where the detection drops out (up to ``max_missed`` of them) it is a prediction, and
+  where it shows, the room's VPs (a vote of many segments) carry the vehicle's yaw while
+  the obstacle's few edges contribute only their share of ``rel``, so one frame's noisy
+  box fit moves the tracked η by ``smoothing`` of its error;
 - eq. 9's choice between the obstacle's two OVPs, which flips with noise when the face
   is near 45° to the line of sight, is kept until the other OVP is nearer the frame centre
   by more than ``switch_margin_deg``;
@@ -86,8 +90,9 @@ def update_track(
             # The same obstacle: keep the OVP being followed unless the other one is
             # clearly nearer the centre.
             kept = _nearest_branch(eta_deg, track.eta_deg)
-            eta = eta_deg if abs(eta_deg) + p.switch_margin_deg < abs(kept) else kept
+            branch = eta_deg if abs(eta_deg) + p.switch_margin_deg < abs(kept) else kept
             new_rel = wrap90(track.rel_deg + p.smoothing * wrap90(rel - track.rel_deg))
+            eta = _nearest_branch(new_rel + eta_room_deg, branch)
             track = Track(new_rel, eta, track.hits + 1, 0)
         elif track is not None and track.confirmed(p) and track.missed < p.max_missed:
             # Another obstacle, or a false alarm: the confirmed track is predicted on, and
