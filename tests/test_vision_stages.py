@@ -841,36 +841,6 @@ def test_a_top_seen_front_on_takes_its_yaw_from_its_receding_edges():
     assert with_top < 0.6 * alone
 
 
-def test_a_leg_along_the_vertical_edge_is_no_horizontal_edge_of_the_corner():
-    # A table's top corner 3 m ahead, 18° off the view: the top's front and receding edges
-    # and a leg hanging from it. The leg's other side, 4 px away and 8° off the vertical
-    # (it missed the V3 label), also leaves the corner; its horizon crossing is 6.5° from
-    # the receding edge's, within the right-angle tolerance of a corner with no partner.
-    from companion.vision.obstacles import find_obstacles
-
-    a = np.radians(18.0)
-    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
-    top = np.array([-0.7, 0.45, 3.0])
-    p = _project([top])[0]
-    front = [*p, *_project([top + 1.4 * u])[0]]
-    receding = [*p, *_project([top + 0.6 * v])[0]]
-    leg = [*p, *_project([top + [0.0, 0.75, 0.0]])[0]]
-    side, tilt = p + [4.0, 3.0], np.radians(8.0)
-    other_side = [*side, *(side + 60.0 * np.array([-np.sin(tilt), np.cos(tilt)]))]
-
-    def m_errors_deg(segs):
-        segs = np.array(segs, float)
-        labels = np.where(np.all(segs == np.array(leg), axis=1), V3, NONE)
-        found = find_obstacles(segs, find_corners(segs, labels), _room_layout(),
-                               labels == NONE, labels)
-        return [angle_between_directions_deg(direction_of(o.ovps[:2], F, C),
-                                             v[None, :]).min() for o in found]
-
-    assert m_errors_deg([front, leg, receding]) == [pytest.approx(0.0, abs=0.05)]
-    assert m_errors_deg([front, leg, other_side]) == []  # was M 6.5° off
-    assert m_errors_deg([front, leg, receding, other_side]) == [pytest.approx(0.0, abs=0.05)]
-
-
 def test_table1_labels_call_a_short_leg_manhattan_within_the_detector_noise():
     from companion.vision.corners import table1_labels
 

@@ -234,18 +234,6 @@ cdef void far_ends(double[:, ::1] s, double[:, ::1] lines, double[:, ::1] pc,
         far[k, 1] = pc[k, 1] + (best if usable[k] else 0.0) * uy
 
 
-cdef inline bint legs_leave_edge(double[:, ::1] s, double[:, ::1] pc, double[:, ::1] far,
-                                 double[::1] reach, Py_ssize_t g, Py_ssize_t leg_s,
-                                 Py_ssize_t leg_n) noexcept nogil:
-    """Whether both legs of C_g (corner ``g``) leave its vertical edge at 20° or more, as
-    C_h's must (:func:`partner_legs`): a leg along the edge is the other side of a thin
-    vertical (a table's leg) that missed the V3 label, or a horizontal edge seen end-on,
-    whose horizon crossing no pixel of it pins down."""
-    cdef double ax = (far[g, 0] - pc[g, 0]) / reach[g], ay = (far[g, 1] - pc[g, 1]) / reach[g]
-    return (fabs(_side(s, leg_s, pc[g, 0], pc[g, 1], ax, ay)) >= MIN_SIDE
-            and fabs(_side(s, leg_n, pc[g, 0], pc[g, 1], ax, ay)) >= MIN_SIDE)
-
-
 cdef Py_ssize_t partner_legs(double[:, ::1] s, double[:, ::1] lines, double px, double py,
                              double ex, double ey, double edge, Py_ssize_t leg_s,
                              Py_ssize_t leg_n, Py_ssize_t[::1] free_idx, Params* p,
@@ -1304,7 +1292,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
             # end (eqs. 6, 7), where the non-Manhattan legs form C_h.
             far_ends(s, lines, pc, cr, verticals, &p, far, reach, usable)
             for g in range(nc):
-                if not usable[g] or not legs_leave_edge(s, pc, far, reach, g, cs[g], cn[g]):
+                if not usable[g]:
                     continue
                 nh = partner_legs(s, lines, pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
                                   reach[g], cs[g], cn[g], free_idx, &p, partners)
