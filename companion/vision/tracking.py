@@ -54,7 +54,7 @@ class TrackParams:
 @dataclass(frozen=True)
 class Track:
     """``rel_deg``: the obstacle face's angle to the room axes, (−45°, 45°];
-    ``eta_deg``: its η in the last frame (the OVP eq. 9 currently follows);
+    ``eta_deg``: the tracked η it gave in the last frame (on the OVP eq. 9 follows);
     ``hits``: consistent detections so far; ``missed``: frames since the last one."""
 
     rel_deg: float
