@@ -466,10 +466,36 @@ def run_live(args) -> int:
     return run_service(config, args.source)
 
 
+_OWN_CONFIG = {"run": "run_config", "eval": "eval_config", "sim": "sim_config",
+               "bench": "bench_config"}
+"""each command's own ``--config`` (its ``dest``)"""
+
+
+def _apply_global_options(args) -> None:
+    """``companion --config X eval`` means ``companion eval --config X``: a command takes
+    the global ``--config`` when it has none of its own, rather than running silently on
+    the defaults. The dry run's other options mean nothing to a command, and are an
+    error rather than ignored."""
+    own = _OWN_CONFIG[args.command]
+    if args.config:
+        if getattr(args, own) and getattr(args, own) != args.config:
+            raise UserError(f"two configs given: --config {args.config} before "
+                            f"`{args.command}` and --config {getattr(args, own)} after it")
+        setattr(args, own, args.config)
+    stray = [flag for flag, given in (("--video", args.video), ("--dry-run", args.dry_run),
+                                      ("--log", args.log), ("--annotate", args.annotate),
+                                      ("--focal-px", args.focal_px is not None)) if given]
+    if stray:
+        raise UserError(f"{', '.join(stray)} go with `companion --video FILE --dry-run`, "
+                        f"not with `companion {args.command}`")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = _parser()
     args = ap.parse_args(argv)
     try:
+        if args.command is not None:
+            _apply_global_options(args)
         if args.command == "eval":
             return run_eval(args)
         if args.command == "run":

@@ -475,6 +475,8 @@ def simulate(args: argparse.Namespace) -> int:
         raise ValueError("--renderer pathtraced goes with --scenario approach")
     if args.eye_level:
         raise ValueError("--eye-level goes with --scenario approach")
+    if args.sim_config:
+        raise ValueError("--config goes with --scenario approach")
     runs = []
     for eta0 in args.eta0:
         if not -89.0 < eta0 < 89.0:

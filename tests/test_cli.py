@@ -181,6 +181,24 @@ def test_unreadable_and_bad_configs(sample_video, tmp_path):
         )
 
 
+def test_a_config_before_the_command_is_the_commands_config(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("policy:\n  max_turn: 10\n")
+    # Read, not silently ignored: its bad key is the error, for every command.
+    for command in ("eval", "bench", "run"):
+        _assert_one_line_error(run("--config", bad, command), "unknown key 'policy.max_turn'")
+    _assert_one_line_error(run("--config", bad, "sim", "--scenario", "approach", "--runs", "1"),
+                           "unknown key 'policy.max_turn'")
+    _assert_one_line_error(run("--config", bad, "sim"), "--config goes with --scenario approach")
+    other = tmp_path / "other.yaml"
+    other.write_text("policy: {}\n")
+    _assert_one_line_error(run("--config", other, "eval", "--config", bad), "two configs given")
+    _assert_one_line_error(run("--log", tmp_path / "x.jsonl", "eval"),
+                           "--log go with `companion --video FILE --dry-run`")
+    _assert_one_line_error(run("--focal-px", "300", "--dry-run", "bench"),
+                           "--dry-run, --focal-px go with")
+
+
 def test_video_without_dry_run_refuses(sample_video):
     _assert_one_line_error(run("--video", sample_video[0]), "needs --dry-run")
 
