@@ -46,7 +46,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     ap.add_argument("--video", metavar="FILE", help="video file, or folder of images, to process")
     ap.add_argument("--dry-run", action="store_true", help="no autopilot: decide, do not fly")
-    ap.add_argument("--config", metavar="PATH", help="YAML config (default: built-in defaults)")
+    ap.add_argument("--config", metavar="PATH",
+                    help="YAML config (default: built-in defaults); before a command, that "
+                         "command's --config")
     ap.add_argument("--log", metavar="PATH", help="write one JSON line per frame")
     ap.add_argument("--annotate", metavar="OUT.mp4", help="write an annotated video")
     ap.add_argument("--focal-px", type=float, metavar="F", help="known focal length in pixels")
