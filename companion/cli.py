@@ -488,8 +488,10 @@ def _apply_global_options(args) -> None:
                                       ("--log", args.log), ("--annotate", args.annotate),
                                       ("--focal-px", args.focal_px is not None)) if given]
     if stray:
+        hint = " (a recording for the service: `companion run --source FILE`)" if (
+            args.command == "run" and args.video) else ""
         raise UserError(f"{', '.join(stray)} go with `companion --video FILE --dry-run`, "
-                        f"not with `companion {args.command}`")
+                        f"not with `companion {args.command}`{hint}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -197,6 +197,7 @@ def test_a_config_before_the_command_is_the_commands_config(tmp_path):
                            "--log go with `companion --video FILE --dry-run`")
     _assert_one_line_error(run("--focal-px", "300", "--dry-run", "bench"),
                            "--dry-run, --focal-px go with")
+    _assert_one_line_error(run("--video", "flight.mp4", "run"), "companion run --source FILE")
 
 
 def test_video_without_dry_run_refuses(sample_video):
