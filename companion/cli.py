@@ -490,7 +490,8 @@ def _apply_global_options(args) -> None:
     if stray:
         hint = " (a recording for the service: `companion run --source FILE`)" if (
             args.command == "run" and args.video) else ""
-        raise UserError(f"{', '.join(stray)} go with `companion --video FILE --dry-run`, "
+        verb = "goes" if len(stray) == 1 else "go"
+        raise UserError(f"{', '.join(stray)} {verb} with `companion --video FILE --dry-run`, "
                         f"not with `companion {args.command}`{hint}")
 
 

@@ -194,7 +194,7 @@ def test_a_config_before_the_command_is_the_commands_config(tmp_path):
     other.write_text("policy: {}\n")
     _assert_one_line_error(run("--config", other, "eval", "--config", bad), "two configs given")
     _assert_one_line_error(run("--log", tmp_path / "x.jsonl", "eval"),
-                           "--log go with `companion --video FILE --dry-run`")
+                           "--log goes with `companion --video FILE --dry-run`")
     _assert_one_line_error(run("--focal-px", "300", "--dry-run", "bench"),
                            "--dry-run, --focal-px go with")
     _assert_one_line_error(run("--video", "flight.mp4", "run"), "companion run --source FILE")
