@@ -702,6 +702,81 @@ def test_a_lone_face_needs_a_room_that_vouches_for_the_focal_length():
     assert found(0.0, v2_seen=False) == []  # V2 inferred from V1, which proves nothing
 
 
+def _rug_aimed_at_the_camera(x=0.6, width=1.0):
+    """A rug on the floor 3 m ahead whose near side runs straight away from the point
+    below the camera: that side lies in a vertical plane through the camera, so its image
+    passes through V3 like a vertical edge. Returns that side (labelled V3, as the layout
+    stage would) and the two sides across its ends; the far side is not found."""
+    p0 = np.array([x, 1.2, 3.0])
+    u = np.array([x, 0.0, 3.0]) / np.hypot(x, 3.0)
+    v = np.array([-u[2], 0.0, u[0]])
+    a, b, c, d = _project([p0, p0 + 1.2 * u, p0 + 1.2 * u + width * v, p0 + width * v])
+    return np.array([[*a, *b], [*b, *c], [*a, *d]]), np.array([V3, NONE, NONE])
+
+
+@pytest.mark.parametrize("x, width", [(0.6, 1.0), (0.6, -1.0), (-0.8, 1.0)])
+def test_a_rug_side_aimed_at_the_cameras_foot_is_no_vertical_edge(x, width):
+    from companion.vision.obstacles import ObstacleParams, find_obstacles
+
+    segs, labels = _rug_aimed_at_the_camera(x, width)
+    assert abs(segs[0, 0] - segs[0, 2]) < 1e-9  # V3 is straight down: a vertical line
+
+    def found(params):
+        return find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                              labels, params)
+
+    # A vertical edge with a leg at each end, whose other OVP, at a right angle, is the
+    # side's own direction: that face would be seen edge-on at both its corners.
+    assert len(found(ObstacleParams(edge_on_deg=0.0))) == 1
+    assert found(ObstacleParams()) == []
+
+
+def test_a_box_seen_with_one_face_edge_on_at_one_corner_is_still_found():
+    # The camera in the plane of the box's other face, through the near corner: that
+    # corner is edge-on, the face's far corner is not, as a rug's side never shows.
+    from companion.vision.obstacles import edge_on_angle_deg, find_obstacles
+
+    yaw = -np.degrees(np.arctan2(0.2, 4.0))  # the other face aimed at the camera
+    segs, u, v = _face_of_rotated_box(yaw)
+    labels = np.array([V3, V3, NONE, NONE])
+    layout = _room_layout(30.0)
+    found = find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE, labels)
+    assert len(found) == 1
+    dirs = direction_of(found[0].ovps[:2], F, C)
+    near = found[0].corners_px[np.argmin(found[0].corners_px[:, 0])]
+    ray = direction_of(np.array([*near, 1.0]), F, C) * [1.0, 0.0, 1.0]
+    assert angle_between_directions_deg(ray / np.linalg.norm(ray), v).item() < 0.1
+    assert edge_on_angle_deg(found[0], layout) > 5.0
+    for face in (u, v):
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+
+
+@pytest.mark.parametrize("roll_deg", [0.0, 4.0])
+def test_edge_on_angle_is_measured_on_the_floor_at_the_least_edge_on_corner(roll_deg):
+    from companion.vision.geometry import point_of
+    from companion.vision.obstacles import Obstacle, edge_on_angle_deg
+    from companion.vision.vanishing import LayoutVPs
+
+    r = np.radians(roll_deg)
+    roll = np.array([[np.cos(r), -np.sin(r), 0.0], [np.sin(r), np.cos(r), 0.0], [0.0, 0.0, 1.0]])
+    a = np.radians(35.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    corners = np.array([[0.2, 1.2, 4.0], [0.2, -1.2, 4.0],
+                        [0.2 + 0.8 * u[0], 1.2, 4.0 + 0.8 * u[2]]])
+    obstacle = Obstacle(ovps=point_of(np.array([u, v, [0.0, 1.0, 0.0]]) @ roll.T, F, C),
+                        corners_px=_project(corners @ roll.T), pairs=1, height_px=100.0,
+                        lambda3_deg=0.0)
+    room = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
+    layout = LayoutVPs(vps=point_of(room @ roll.T, F, C), observed=(True, True, True),
+                       support_px=np.ones(3), focal_px=F, centre=C)
+    bearings = corners * [1.0, 0.0, 1.0]
+    bearings /= np.linalg.norm(bearings, axis=1, keepdims=True)
+    per_corner = angle_between_directions_deg(bearings[:, None, :], np.array([u, v])[None])
+    expected = per_corner.min(axis=1).max()
+    assert 5.0 < expected < 85.0
+    assert edge_on_angle_deg(obstacle, layout) == pytest.approx(expected, abs=1e-6)
+
+
 def test_legs_of_two_things_at_one_vertical_edge_make_no_single_face():
     # At both ends of both vertical edges a second leg runs 8° off the face (too close to
     # the first to make a corner with it): each edge gives two halves on the horizon, 8°

@@ -19,6 +19,9 @@ Pairs that share their OVPs (within ``merge_deg``) are one obstacle, and further
 whose legs pass through those OVPs join it (the paper's use of λ3 across corners). Its
 OVPs are then fitted to all its horizontal edges at once as one box's yaw about the
 vertical (:func:`fit_box_ovps`): eq. 8 with λ3 = 0, given the focal length.
+An obstacle that would show a face edge-on at every one of its corners is dropped
+(:func:`edge_on_angle_deg`): its vertical edge is more likely a line on the floor aimed at
+the camera's foot.
 """
 
 from __future__ import annotations
@@ -31,9 +34,10 @@ import numpy as np
 from companion.vision._obstacles import find
 from companion.vision._obstacles import fit_box_ovps as _fit_box_ovps
 from companion.vision.corners import Corners
+from companion.vision.geometry import angle_between_directions_deg, direction_of
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs
 
-__all__ = ["ObstacleParams", "Obstacle", "find_obstacles", "fit_box_ovps"]
+__all__ = ["ObstacleParams", "Obstacle", "edge_on_angle_deg", "find_obstacles", "fit_box_ovps"]
 
 
 @dataclass(frozen=True)
@@ -56,6 +60,10 @@ class ObstacleParams:
     box_fit: bool = True  # OVPs fitted as one box's yaw about V3 (fit_box_ovps)
     hidden_edge_corners: bool = True  # two legs meeting where no vertical edge shows, one
     # running on to a vertical edge: a box corner whose faces are lit alike
+    edge_on_deg: float = field(default=3.0, metadata={"range": (0.0, 45.0)})
+    """an obstacle each of whose corners lies within this of an OVP's bearing would show a
+    face edge-on at every corner, as a line on the floor aimed at the camera's foot does
+    (:func:`edge_on_angle_deg`); 0 keeps every obstacle"""
 
 
 @dataclass(frozen=True)
@@ -121,9 +129,46 @@ def find_obstacles(
                  layout.focal_px, layout.centre[0], layout.centre[1], free, labels, V3, p,
                  radius_px, leg_gap_frac, math.sin(math.radians(min_leg_angle_deg)),
                  layout.observed[V1] and layout.observed[V2], noise_px)
-    obstacles = [Obstacle(*fields) for fields in found]
+    obstacles = [o for o in (Obstacle(*fields) for fields in found)
+                 if edge_on_angle_deg(o, layout) >= p.edge_on_deg]
     obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles
+
+
+def edge_on_angle_deg(obstacle: Obstacle, layout: LayoutVPs) -> float:
+    """How nearly edge-on the obstacle shows a face at each of its corners: the largest,
+    over its corners, of the angle in the horizontal plane between the ray to the corner
+    and the nearer of its two OVPs.
+
+    At a corner where that angle is 0 the camera lies in the plane of the face that runs
+    along that OVP through the corner: the face shows nothing, and its edges lie on the
+    corner's own line through V3. A line on the floor (or the ceiling) aimed at the point
+    below the camera is such a line too: it lies in a vertical plane through the camera,
+    so its image passes through V3 as a vertical edge's does, and its direction is its
+    bearing. A rug's or a shadow's side is taken for a box's vertical edge this way, the
+    rug's other sides for legs, and the side itself gives the other OVP. A real box seen
+    with one face edge-on still shows another vertical edge where no face is edge-on; an
+    obstacle that is edge-on at every corner cannot be told from the rug. (Edge-on at any
+    one corner would also drop a box whose face the vehicle flies along, in that face's
+    plane: a course onto its edge.)
+
+    Inputs: an :class:`Obstacle`; the frame's ``layout`` (V3, focal length, centre).
+    Output: degrees in [0, 90]; 90 for an obstacle without corners.
+    """
+    f, c = layout.focal_px, layout.centre
+    up = direction_of(layout.vps[V3], f, c)
+
+    def horizontal(d: np.ndarray) -> np.ndarray:
+        h = d - (d @ up)[..., None] * up
+        return h / np.linalg.norm(h, axis=-1, keepdims=True)
+
+    corners = np.asarray(obstacle.corners_px, dtype=float).reshape(-1, 2)
+    if len(corners) == 0:
+        return 90.0
+    rays = horizontal(direction_of(np.column_stack([corners, np.ones(len(corners))]), f, c))
+    faces = horizontal(direction_of(obstacle.ovps[:2], f, c))
+    angles = angle_between_directions_deg(rays[:, None, :], faces[None, :, :])
+    return float(np.max(np.min(angles, axis=1)))
 
 
 def fit_box_ovps(legs: np.ndarray, ovps: np.ndarray, layout: LayoutVPs,
