@@ -34,7 +34,6 @@ import numpy as np
 from companion.vision._obstacles import find
 from companion.vision._obstacles import fit_box_ovps as _fit_box_ovps
 from companion.vision.corners import Corners
-from companion.vision.geometry import angle_between_directions_deg, direction_of
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs
 
 __all__ = ["ObstacleParams", "Obstacle", "edge_on_angle_deg", "find_obstacles", "fit_box_ovps"]
@@ -155,20 +154,33 @@ def edge_on_angle_deg(obstacle: Obstacle, layout: LayoutVPs) -> float:
     Inputs: an :class:`Obstacle`; the frame's ``layout`` (V3, focal length, centre).
     Output: degrees in [0, 90]; 90 for an obstacle without corners.
     """
-    f, c = layout.focal_px, layout.centre
-    up = direction_of(layout.vps[V3], f, c)
+    # Scalar arithmetic on a handful of rays (K⁻¹ v, as geometry.direction_of): numpy on
+    # arrays this small costs several times more, on every frame.
+    f = float(layout.focal_px)
+    cx, cy = (float(v) for v in layout.centre)
 
-    def horizontal(d: np.ndarray) -> np.ndarray:
-        h = d - (d @ up)[..., None] * up
-        return h / np.linalg.norm(h, axis=-1, keepdims=True)
+    def ray(x: float, y: float, w: float) -> tuple[float, float, float]:
+        return x - cx * w, y - cy * w, f * w
 
-    corners = np.asarray(obstacle.corners_px, dtype=float).reshape(-1, 2)
-    if len(corners) == 0:
-        return 90.0
-    rays = horizontal(direction_of(np.column_stack([corners, np.ones(len(corners))]), f, c))
-    faces = horizontal(direction_of(obstacle.ovps[:2], f, c))
-    angles = angle_between_directions_deg(rays[:, None, :], faces[None, :, :])
-    return float(np.max(np.min(angles, axis=1)))
+    ux, uy, uz = ray(*(float(v) for v in layout.vps[V3]))
+    norm = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux, uy, uz = ux / norm, uy / norm, uz / norm
+
+    def on_floor(d: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The unit horizontal part of direction ``d`` (V3's component removed); zero for
+        a vertical one, which has no bearing."""
+        k = d[0] * ux + d[1] * uy + d[2] * uz
+        hx, hy, hz = d[0] - k * ux, d[1] - k * uy, d[2] - k * uz
+        m = math.sqrt(hx * hx + hy * hy + hz * hz)
+        return (hx / m, hy / m, hz / m) if m > 1e-12 else (0.0, 0.0, 0.0)
+
+    faces = [on_floor(ray(*(float(v) for v in ovp))) for ovp in obstacle.ovps[:2]]
+    least_cos = 1.0  # of the largest angle so far
+    for x, y in np.asarray(obstacle.corners_px, dtype=float).reshape(-1, 2).tolist():
+        rx, ry, rz = on_floor(ray(x, y, 1.0))
+        nearer = max(abs(rx * a + ry * b + rz * c) for a, b, c in faces)
+        least_cos = min(least_cos, nearer)
+    return math.degrees(math.acos(min(1.0, least_cos))) if len(obstacle.corners_px) else 90.0
 
 
 def fit_box_ovps(legs: np.ndarray, ovps: np.ndarray, layout: LayoutVPs,
