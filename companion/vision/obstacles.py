@@ -154,6 +154,9 @@ def edge_on_angle_deg(obstacle: Obstacle, layout: LayoutVPs) -> float:
     Inputs: an :class:`Obstacle`; the frame's ``layout`` (V3, focal length, centre).
     Output: degrees in [0, 90]; 90 for an obstacle without corners.
     """
+    corners = np.asarray(obstacle.corners_px, dtype=float).reshape(-1, 2).tolist()
+    if not corners:
+        return 90.0
     # Scalar arithmetic on a handful of rays (K⁻¹ v, as geometry.direction_of): numpy on
     # arrays this small costs several times more, on every frame.
     f = float(layout.focal_px)
@@ -176,11 +179,11 @@ def edge_on_angle_deg(obstacle: Obstacle, layout: LayoutVPs) -> float:
 
     faces = [on_floor(ray(*(float(v) for v in ovp))) for ovp in obstacle.ovps[:2]]
     least_cos = 1.0  # of the largest angle so far
-    for x, y in np.asarray(obstacle.corners_px, dtype=float).reshape(-1, 2).tolist():
+    for x, y in corners:
         rx, ry, rz = on_floor(ray(x, y, 1.0))
         nearer = max(abs(rx * a + ry * b + rz * c) for a, b, c in faces)
         least_cos = min(least_cos, nearer)
-    return math.degrees(math.acos(min(1.0, least_cos))) if len(obstacle.corners_px) else 90.0
+    return math.degrees(math.acos(min(1.0, least_cos)))
 
 
 def fit_box_ovps(legs: np.ndarray, ovps: np.ndarray, layout: LayoutVPs,
