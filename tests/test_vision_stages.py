@@ -731,6 +731,34 @@ def test_a_rug_side_aimed_at_the_cameras_foot_is_no_vertical_edge(x, width):
     assert found(ObstacleParams()) == []
 
 
+@pytest.mark.parametrize("off_deg", [0.0, 1.5])
+def test_a_rug_corner_with_a_side_aimed_at_the_cameras_foot_is_no_hidden_edge_corner(off_deg):
+    # A rug's near corner on the floor: one side runs (nearly) straight away from the point
+    # below the camera, the other runs on to a pole standing at its far end. The two sides
+    # meet where no vertical edge shows, as at a box's near corner whose faces are lit
+    # alike; but the aimed side lies on the corner's own line through V3, where that
+    # unseen edge would be, so the corner proves nothing.
+    from companion.vision.obstacles import ObstacleParams, find_obstacles
+
+    p0 = np.array([0.6, 1.2, 3.0])
+    b = np.radians(np.degrees(np.arctan2(0.6, 3.0)) + off_deg)
+    u = np.array([np.sin(b), 0.0, np.cos(b)])
+    v = np.array([-u[2], 0.0, u[0]])
+    a, far, d, top = _project([p0, p0 + 1.2 * u, p0 + 1.0 * v, p0 + 1.0 * v + [0.0, -1.0, 0.0]])
+    segs = np.array([[*a, *far], [*a, *d], [*d, *top]])
+    labels = np.array([NONE, NONE, V3])  # a few degrees off V3 the side is a free leg
+    corners = find_corners(segs, labels)
+    assert len(corners) == 0
+
+    def found(params):
+        return find_obstacles(segs, corners, _room_layout(), labels == NONE, labels, params)
+
+    # Only the hidden-edge rule makes anything of it: the pole is edge-on at no corner.
+    assert len(found(ObstacleParams(edge_on_deg=0.0))) == 1
+    assert found(ObstacleParams(edge_on_deg=0.0, hidden_edge_corners=False)) == []
+    assert found(ObstacleParams()) == []
+
+
 def test_a_box_seen_with_one_face_edge_on_at_one_corner_is_still_found():
     # The camera in the plane of the box's other face, through the near corner: that
     # corner is edge-on, the face's far corner is not, as a rug's side never shows.

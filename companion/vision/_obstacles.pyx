@@ -42,6 +42,7 @@ cdef struct Params:
     double radius_px
     double leg_gap_frac
     double noise_px
+    double edge_on_deg
 
 
 # What every step needs of the layout: the camera, V3's direction, the horizon and the
@@ -130,6 +131,25 @@ cdef inline void ovp_error(Frame* fr, const double* d1, const double* d2,
     cdef double a = horizon_error(fr, d1), b = horizon_error(fr, d2)
     horizon[0] = a if a > b else b
     ortho[0] = fabs(90.0 - angle_between_deg(d1, d2))
+
+
+cdef inline double bearing_gap_deg(Frame* fr, double x, double y, const double* d) noexcept nogil:
+    """Angle in the horizontal plane between the ray to pixel (x, y) and the direction
+    ``d``, in [0°, 90°]: 0 when a face along ``d`` through that point is seen edge-on, its
+    edges on the point's own line through V3 (as :func:`companion.vision.obstacles.
+    edge_on_angle_deg` measures per corner)."""
+    cdef double r[3]
+    cdef double h[3]
+    cdef double kr, kh
+    cdef Py_ssize_t i
+    r[0], r[1], r[2] = x - fr.cx, y - fr.cy, fr.f
+    kr, kh = dot3(r, fr.d3), dot3(d, fr.d3)
+    for i in range(3):
+        r[i] -= kr * fr.d3[i]
+        h[i] = d[i] - kh * fr.d3[i]
+    if unit3(r) == 0 or unit3(h) == 0:
+        return 90.0
+    return angle_between_deg(r, h)
 
 
 cdef inline bint off_layout(Frame* fr, Params* p, const double* d) noexcept nogil:
@@ -676,6 +696,12 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                 attached.setdefault(leg, []).append((chain, end))
     for x, y, a, b in junctions:
         if not horizon_ovps(fr, p, lines, a, b, d1, d2, &ortho):
+            continue
+        # A leg seen edge-on runs along the junction's own line through V3, where the
+        # unseen vertical edge would be: a line on the floor aimed at the camera's foot
+        # (a rug's side) looks so, and the junction is then no proof of a box's corner.
+        if bearing_gap_deg(fr, x, y, d1) < p.edge_on_deg \
+                or bearing_gap_deg(fr, x, y, d2) < p.edge_on_deg:
             continue
         pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
         pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
@@ -1231,6 +1257,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.radius_px = radius_px
     p.leg_gap_frac = leg_gap_frac
     p.noise_px = noise_px
+    p.edge_on_deg = params.edge_on_deg
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
     cdef Py_ssize_t n = s.shape[0], i, k, g, nh
     if n == 0:

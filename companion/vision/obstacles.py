@@ -21,7 +21,8 @@ OVPs are then fitted to all its horizontal edges at once as one box's yaw about 
 vertical (:func:`fit_box_ovps`): eq. 8 with λ3 = 0, given the focal length.
 An obstacle that would show a face edge-on at every one of its corners is dropped
 (:func:`edge_on_angle_deg`): its vertical edge is more likely a line on the floor aimed at
-the camera's foot.
+the camera's foot. For the same reason a hidden-edge corner (two legs meeting where no
+vertical edge shows) counts only where neither leg is seen edge-on.
 """
 
 from __future__ import annotations
@@ -62,7 +63,8 @@ class ObstacleParams:
     edge_on_deg: float = field(default=3.0, metadata={"range": (0.0, 45.0)})
     """an obstacle each of whose corners lies within this of an OVP's bearing would show a
     face edge-on at every corner, as a line on the floor aimed at the camera's foot does
-    (:func:`edge_on_angle_deg`); 0 keeps every obstacle"""
+    (:func:`edge_on_angle_deg`), and a hidden-edge corner so near one of its legs' bearings
+    has that leg where its unseen vertical edge would be; 0 keeps every obstacle"""
 
 
 @dataclass(frozen=True)
@@ -112,8 +114,9 @@ def find_obstacles(
     junctions one above the other; vertical edges with a leg at each end (at an end where
     a room edge comes nearer than the leg, by more than ``noise_px``, on the leg's side,
     the end is a door frame's corner and the leg not the edge's); (with
-    ``hidden_edge_corners``) two legs meeting where no vertical edge shows, one of them
-    running on to a vertical edge at its far end; a box showing one face; and last a
+    ``hidden_edge_corners``) two legs meeting where no vertical edge shows, neither seen
+    edge-on there (``edge_on_deg``), one of them running on to a vertical edge at its far
+    end; a box showing one face; and last a
     face's top edge with vertical edges hanging from it (a table seen from the front, its
     legs under the top).
 
