@@ -731,6 +731,33 @@ def test_a_rug_side_aimed_at_the_cameras_foot_is_no_vertical_edge(x, width):
     assert found(ObstacleParams()) == []
 
 
+def test_a_rug_dropped_as_edge_on_leaves_the_later_rules_to_find_the_table():
+    # A rug's side aimed at the camera's foot, taken for a lone face (single_halves), and
+    # a table seen from the front, which only the last rule (hanging_faces) finds: the
+    # later rules run only when the earlier found nothing, and a rug dropped as edge-on
+    # at every corner counts as nothing.
+    from companion.vision.obstacles import ObstacleParams, find_obstacles
+
+    rug, rug_labels = _rug_aimed_at_the_camera(1.2, 0.6)
+    table, u, v = _table_from_the_front()
+    segs = np.vstack([rug, table])
+    labels = np.concatenate([rug_labels, [NONE, V3, V3]])
+
+    def found(params=None):
+        return find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                              labels, params)
+
+    kept = found(ObstacleParams(edge_on_deg=0.0))
+    assert len(kept) == 1
+    assert np.allclose(np.sort(kept[0].corners_px[:, 1]), np.sort(rug[0, [1, 3]]), atol=1.0)
+    obstacles = found()
+    assert len(obstacles) == 1
+    assert np.abs(obstacles[0].corners_px[:, 1] - table[0, [1, 3]].mean()).max() < 10.0
+    dirs = direction_of(obstacles[0].ovps[:2], F, C)
+    for face in (u, v):
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+
+
 @pytest.mark.parametrize("off_deg", [0.0, 1.5])
 def test_a_rug_corner_with_a_side_aimed_at_the_cameras_foot_is_no_hidden_edge_corner(off_deg):
     # A rug's near corner on the floor: one side runs (nearly) straight away from the point

@@ -1234,13 +1234,21 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
         h.npoints = 2
 
 
+# The steps of :func:`find`, in order; each later one runs only when the earlier ones
+# found nothing.
+STEPS = ("pairs", "edge_horizon_pairs", "junction_edge_pairs", "single_halves",
+         "hanging_faces")
+
+
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
          double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
          double radius_px, double leg_gap_frac, double min_leg_sin, bint room_seen,
-         double noise_px):
+         double noise_px, Py_ssize_t first_step=0):
     """Obstacles from Table-I corners and vertical edges (see
-    :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
-    corners_px K×2, pairs, height_px, λ3)."""
+    :func:`companion.vision.obstacles.find_obstacles`), unsorted, and the step (an index
+    into :data:`STEPS`) that found them: ``(obstacles, step)``, each obstacle a tuple
+    (ovps 3×3, corners_px K×2, pairs, height_px, λ3); ``([], len(STEPS))`` when no step
+    finds anything. ``first_step`` skips the steps before it."""
     cdef Params p
     p.collinear_px = params.collinear_px
     p.min_edge_px = params.min_edge_px
@@ -1259,9 +1267,9 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.noise_px = noise_px
     p.edge_on_deg = params.edge_on_deg
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
-    cdef Py_ssize_t n = s.shape[0], i, k, g, nh
+    cdef Py_ssize_t n = s.shape[0], i, k, g, nh, step = len(STEPS)
     if n == 0:
-        return []
+        return [], step
     cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
     cdef double[:, ::1] lines = np.empty((n, 3))
     cdef double[::1] lengths = np.empty(n)
@@ -1314,7 +1322,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     cdef Py_ssize_t[::1] manhattan_idx = np.flatnonzero(
         ~np.asarray(free_legs, bool) & (lab != vertical_label))
     try:
-        if nc and verticals.shape[0]:
+        if first_step == 0 and nc and verticals.shape[0]:
             # Pairs (eqs. 5–8): each Table-I corner's vertical edge followed to its other
             # end (eqs. 6, 7), where the non-Manhattan legs form C_h.
             far_ends(s, lines, pc, cr, verticals, &p, far, reach, usable)
@@ -1343,26 +1351,32 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 h.corner = g
         # Vertical edges the detector did not see, implied by leg junctions above each other.
         junctions = leg_junctions(s, lines, lengths, free_idx, min_leg_sin, &p)
-        junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
+        if first_step == 0:
+            junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
         chains = vertical_chains(s, lengths, lines, verticals, &p)
         edges = edge_legs(s, lengths, chains, free_idx, &p)
         silhouette_halves(&fr, &p, s, lengths, lines, edges, manhattan_idx, &halves)
-        pair_halves(&fr, &p, &halves, &found)
-        if found.count == 0:
-            edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
-        if found.count == 0 and p.hidden_edge_corners:
-            junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx, &found)
-        if found.count == 0 and room_seen:
-            single_halves(&fr, &p, &halves, &found)
-        if found.count == 0 and room_seen:
-            hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
-        if found.count == 0:
-            return []
+        if first_step == 0:
+            pair_halves(&fr, &p, &halves, &found)
+        for step in range(max(first_step, 0), len(STEPS)):
+            if step == 1:
+                edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
+            elif step == 2 and p.hidden_edge_corners:
+                junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx,
+                                    &found)
+            elif step == 3 and room_seen:
+                single_halves(&fr, &p, &halves, &found)
+            elif step == 4 and room_seen:
+                hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
+            if found.count:
+                break
+        else:
+            return [], len(STEPS)
         obstacles = []
         for members in group_by_ovps(&found, p.merge_deg):
             obstacles.append(obstacle(&fr, &p, s, lines, members, &found, pc, cs, cn, &vps[2, 0]))
-        return obstacles
+        return obstacles, step
     finally:
         free(found.items)
         free(halves.items)

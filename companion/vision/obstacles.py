@@ -21,7 +21,8 @@ OVPs are then fitted to all its horizontal edges at once as one box's yaw about 
 vertical (:func:`fit_box_ovps`): eq. 8 with λ3 = 0, given the focal length.
 An obstacle that would show a face edge-on at every one of its corners is dropped
 (:func:`edge_on_angle_deg`): its vertical edge is more likely a line on the floor aimed at
-the camera's foot. For the same reason a hidden-edge corner (two legs meeting where no
+the camera's foot, and the rules that run when nothing is found then run. For the same
+reason a hidden-edge corner (two legs meeting where no
 vertical edge shows) counts only where neither leg is seen edge-on.
 """
 
@@ -32,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.vision._obstacles import find
+from companion.vision._obstacles import STEPS, find
 from companion.vision._obstacles import fit_box_ovps as _fit_box_ovps
 from companion.vision.corners import Corners
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs
@@ -116,9 +117,10 @@ def find_obstacles(
     the end is a door frame's corner and the leg not the edge's); (with
     ``hidden_edge_corners``) two legs meeting where no vertical edge shows, neither seen
     edge-on there (``edge_on_deg``), one of them running on to a vertical edge at its far
-    end; a box showing one face; and last a
-    face's top edge with vertical edges hanging from it (a table seen from the front, its
-    legs under the top).
+    end; a box showing one face; and last a face's top edge with vertical edges hanging
+    from it (a table seen from the front, its legs under the top). An obstacle edge-on at
+    every corner (:func:`edge_on_angle_deg` below ``edge_on_deg``) is dropped; when a
+    step's obstacles are all dropped, the steps after it run as if it had found nothing.
 
     Inputs: ``segments`` N×4 pixels; ``corners`` already filtered by Table I;
     ``layout`` the frame's layout VPs; ``free`` N bool, segments that may be obstacle
@@ -127,12 +129,19 @@ def find_obstacles(
     Output: a list of :class:`Obstacle`, possibly empty.
     """
     p = params or ObstacleParams()
-    found = find(segments, corners.points_px, corners.s, corners.n, corners.r, layout.vps,
-                 layout.focal_px, layout.centre[0], layout.centre[1], free, labels, V3, p,
-                 radius_px, leg_gap_frac, math.sin(math.radians(min_leg_angle_deg)),
-                 layout.observed[V1] and layout.observed[V2], noise_px)
-    obstacles = [o for o in (Obstacle(*fields) for fields in found)
-                 if edge_on_angle_deg(o, layout) >= p.edge_on_deg]
+    obstacles: list[Obstacle] = []
+    first_step = 0
+    while first_step < len(STEPS):
+        found, step = find(segments, corners.points_px, corners.s, corners.n, corners.r,
+                           layout.vps, layout.focal_px, layout.centre[0], layout.centre[1],
+                           free, labels, V3, p, radius_px, leg_gap_frac,
+                           math.sin(math.radians(min_leg_angle_deg)),
+                           layout.observed[V1] and layout.observed[V2], noise_px, first_step)
+        obstacles = [o for o in (Obstacle(*fields) for fields in found)
+                     if edge_on_angle_deg(o, layout) >= p.edge_on_deg]
+        if obstacles:
+            break
+        first_step = step + 1  # what that step found was lines on the floor: the next one
     obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles
 
