@@ -136,8 +136,8 @@ cdef inline void ovp_error(Frame* fr, const double* d1, const double* d2,
 cdef inline double bearing_gap_deg(Frame* fr, double x, double y, const double* d) noexcept nogil:
     """Angle in the horizontal plane between the ray to pixel (x, y) and the direction
     ``d``, in [0°, 90°]: 0 when a face along ``d`` through that point is seen edge-on, its
-    edges on the point's own line through V3 (as :func:`companion.vision.obstacles.
-    edge_on_angle_deg` measures per corner)."""
+    edges on the point's own line through V3. The per-corner measure of
+    :func:`companion.vision.obstacles.edge_on_angle_deg`."""
     cdef double r[3]
     cdef double h[3]
     cdef double kr, kh

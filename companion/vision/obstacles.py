@@ -22,8 +22,8 @@ vertical (:func:`fit_box_ovps`): eq. 8 with λ3 = 0, given the focal length.
 An obstacle that would show a face edge-on at every one of its corners is dropped
 (:func:`edge_on_angle_deg`): its vertical edge is more likely a line on the floor aimed at
 the camera's foot, and the rules that run when nothing is found then run. For the same
-reason a hidden-edge corner (two legs meeting where no
-vertical edge shows) counts only where neither leg is seen edge-on.
+reason a hidden-edge corner (two legs meeting where no vertical edge shows) counts only
+where neither leg is seen edge-on.
 """
 
 from __future__ import annotations
