@@ -1027,6 +1027,32 @@ def fit_box_ovps(segments, ovps, layout_vps, double focal, double cx, double cy,
     return np.asarray(out)
 
 
+def edge_on_angle(corners_px, ovps, layout_vps, double focal, double cx, double cy):
+    """The largest, over ``corners_px`` (K×2), of the smaller :func:`bearing_gap_deg` to
+    the two OVPs (``ovps``' first two rows, homogeneous pixels): see
+    :func:`companion.vision.obstacles.edge_on_angle_deg`. Degrees; 90 without corners."""
+    cdef double[:, ::1] pc = np.ascontiguousarray(corners_px, dtype=float).reshape(-1, 2)
+    cdef double[:, ::1] o = np.ascontiguousarray(ovps, dtype=float).reshape(-1, 3)
+    cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
+    cdef double d1[3]
+    cdef double d2[3]
+    cdef double worst = 0.0, a, b
+    cdef Py_ssize_t k
+    if pc.shape[0] == 0:
+        return 90.0
+    cdef Frame fr
+    fr.f, fr.cx, fr.cy = focal, cx, cy
+    direction_of(&fr, &vps[2, 0], fr.d3)
+    direction_of(&fr, &o[0, 0], d1)
+    direction_of(&fr, &o[1, 0], d2)
+    for k in range(pc.shape[0]):
+        a = bearing_gap_deg(&fr, pc[k, 0], pc[k, 1], d1)
+        b = bearing_gap_deg(&fr, pc[k, 0], pc[k, 1], d2)
+        a = a if a < b else b
+        worst = a if a > worst else worst
+    return worst
+
+
 cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                     list members, Hypotheses* found, double[:, ::1] pc, long long[::1] cs,
                     long long[::1] cn, const double* v3_px):

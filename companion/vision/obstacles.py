@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.vision._obstacles import STEPS, find
+from companion.vision._obstacles import edge_on_angle as _edge_on_angle
 from companion.vision._obstacles import fit_box_ovps as _fit_box_ovps
 from companion.vision.corners import Corners
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs
@@ -166,36 +167,8 @@ def edge_on_angle_deg(obstacle: Obstacle, layout: LayoutVPs) -> float:
     Inputs: an :class:`Obstacle`; the frame's ``layout`` (V3, focal length, centre).
     Output: degrees in [0, 90]; 90 for an obstacle without corners.
     """
-    corners = np.asarray(obstacle.corners_px, dtype=float).reshape(-1, 2).tolist()
-    if not corners:
-        return 90.0
-    # Scalar arithmetic on a handful of rays (K⁻¹ v, as geometry.direction_of): numpy on
-    # arrays this small costs several times more, on every frame.
-    f = float(layout.focal_px)
-    cx, cy = (float(v) for v in layout.centre)
-
-    def ray(x: float, y: float, w: float) -> tuple[float, float, float]:
-        return x - cx * w, y - cy * w, f * w
-
-    ux, uy, uz = ray(*(float(v) for v in layout.vps[V3]))
-    norm = math.sqrt(ux * ux + uy * uy + uz * uz)
-    ux, uy, uz = ux / norm, uy / norm, uz / norm
-
-    def on_floor(d: tuple[float, float, float]) -> tuple[float, float, float]:
-        """The unit horizontal part of direction ``d`` (V3's component removed); zero for
-        a vertical one, which has no bearing."""
-        k = d[0] * ux + d[1] * uy + d[2] * uz
-        hx, hy, hz = d[0] - k * ux, d[1] - k * uy, d[2] - k * uz
-        m = math.sqrt(hx * hx + hy * hy + hz * hz)
-        return (hx / m, hy / m, hz / m) if m > 1e-12 else (0.0, 0.0, 0.0)
-
-    faces = [on_floor(ray(*(float(v) for v in ovp))) for ovp in obstacle.ovps[:2]]
-    least_cos = 1.0  # of the largest angle so far
-    for x, y in corners:
-        rx, ry, rz = on_floor(ray(x, y, 1.0))
-        nearer = max(abs(rx * a + ry * b + rz * c) for a, b, c in faces)
-        least_cos = min(least_cos, nearer)
-    return math.degrees(math.acos(min(1.0, least_cos)))
+    return _edge_on_angle(obstacle.corners_px, obstacle.ovps, layout.vps, layout.focal_px,
+                          layout.centre[0], layout.centre[1])
 
 
 def fit_box_ovps(legs: np.ndarray, ovps: np.ndarray, layout: LayoutVPs,
