@@ -1027,30 +1027,34 @@ def fit_box_ovps(segments, ovps, layout_vps, double focal, double cx, double cy,
     return np.asarray(out)
 
 
-def edge_on_angle(corners_px, ovps, layout_vps, double focal, double cx, double cy):
-    """The largest, over ``corners_px`` (K×2), of the smaller :func:`bearing_gap_deg` to
-    the two OVPs (``ovps``' first two rows, homogeneous pixels): see
-    :func:`companion.vision.obstacles.edge_on_angle_deg`. Degrees; 90 without corners."""
-    cdef double[:, ::1] pc = np.ascontiguousarray(corners_px, dtype=float).reshape(-1, 2)
-    cdef double[:, ::1] o = np.ascontiguousarray(ovps, dtype=float).reshape(-1, 3)
-    cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
+cdef double edge_on_worst(Frame* fr, double[:, ::1] pc, double[:, ::1] ovps) noexcept:
+    """The largest, over corners ``pc`` (K×2), of the smaller :func:`bearing_gap_deg` to
+    the two OVPs (``ovps``' first two rows, homogeneous pixels); 90 without corners."""
     cdef double d1[3]
     cdef double d2[3]
     cdef double worst = 0.0, a, b
     cdef Py_ssize_t k
     if pc.shape[0] == 0:
         return 90.0
-    cdef Frame fr
-    fr.f, fr.cx, fr.cy = focal, cx, cy
-    direction_of(&fr, &vps[2, 0], fr.d3)
-    direction_of(&fr, &o[0, 0], d1)
-    direction_of(&fr, &o[1, 0], d2)
+    direction_of(fr, &ovps[0, 0], d1)
+    direction_of(fr, &ovps[1, 0], d2)
     for k in range(pc.shape[0]):
-        a = bearing_gap_deg(&fr, pc[k, 0], pc[k, 1], d1)
-        b = bearing_gap_deg(&fr, pc[k, 0], pc[k, 1], d2)
+        a = bearing_gap_deg(fr, pc[k, 0], pc[k, 1], d1)
+        b = bearing_gap_deg(fr, pc[k, 0], pc[k, 1], d2)
         a = a if a < b else b
         worst = a if a > worst else worst
     return worst
+
+
+def edge_on_angle(corners_px, ovps, layout_vps, double focal, double cx, double cy):
+    """:func:`edge_on_worst` of one obstacle (see
+    :func:`companion.vision.obstacles.edge_on_angle_deg`). Degrees; 90 without corners."""
+    cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
+    cdef Frame fr
+    fr.f, fr.cx, fr.cy = focal, cx, cy
+    direction_of(&fr, &vps[2, 0], fr.d3)
+    return edge_on_worst(&fr, np.ascontiguousarray(corners_px, dtype=float).reshape(-1, 2),
+                         np.ascontiguousarray(ovps, dtype=float).reshape(-1, 3))
 
 
 cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
@@ -1260,21 +1264,15 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
         h.npoints = 2
 
 
-# The steps of :func:`find`, in order; each later one runs only when the earlier ones
-# found nothing.
-STEPS = ("pairs", "edge_horizon_pairs", "junction_edge_pairs", "single_halves",
-         "hanging_faces")
-
-
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
          double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
          double radius_px, double leg_gap_frac, double min_leg_sin, bint room_seen,
-         double noise_px, Py_ssize_t first_step=0):
+         double noise_px):
     """Obstacles from Table-I corners and vertical edges (see
-    :func:`companion.vision.obstacles.find_obstacles`), unsorted, and the step (an index
-    into :data:`STEPS`) that found them: ``(obstacles, step)``, each obstacle a tuple
-    (ovps 3×3, corners_px K×2, pairs, height_px, λ3); ``([], len(STEPS))`` when no step
-    finds anything. ``first_step`` skips the steps before it."""
+    :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
+    corners_px K×2, pairs, height_px, λ3). The steps run in order, each only when the ones
+    before found nothing; an obstacle edge-on at every corner (:func:`edge_on_worst` below
+    ``edge_on_deg``) counts as nothing."""
     cdef Params p
     p.collinear_px = params.collinear_px
     p.min_edge_px = params.min_edge_px
@@ -1293,9 +1291,9 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.noise_px = noise_px
     p.edge_on_deg = params.edge_on_deg
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
-    cdef Py_ssize_t n = s.shape[0], i, k, g, nh, step = len(STEPS)
+    cdef Py_ssize_t n = s.shape[0], i, k, g, nh, step
     if n == 0:
-        return [], step
+        return []
     cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
     cdef double[:, ::1] lines = np.empty((n, 3))
     cdef double[::1] lengths = np.empty(n)
@@ -1348,7 +1346,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     cdef Py_ssize_t[::1] manhattan_idx = np.flatnonzero(
         ~np.asarray(free_legs, bool) & (lab != vertical_label))
     try:
-        if first_step == 0 and nc and verticals.shape[0]:
+        if nc and verticals.shape[0]:
             # Pairs (eqs. 5–8): each Table-I corner's vertical edge followed to its other
             # end (eqs. 6, 7), where the non-Manhattan legs form C_h.
             far_ends(s, lines, pc, cr, verticals, &p, far, reach, usable)
@@ -1377,15 +1375,14 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 h.corner = g
         # Vertical edges the detector did not see, implied by leg junctions above each other.
         junctions = leg_junctions(s, lines, lengths, free_idx, min_leg_sin, &p)
-        if first_step == 0:
-            junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
+        junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
         chains = vertical_chains(s, lengths, lines, verticals, &p)
         edges = edge_legs(s, lengths, chains, free_idx, &p)
         silhouette_halves(&fr, &p, s, lengths, lines, edges, manhattan_idx, &halves)
-        if first_step == 0:
-            pair_halves(&fr, &p, &halves, &found)
-        for step in range(max(first_step, 0), len(STEPS)):
+        pair_halves(&fr, &p, &halves, &found)
+        # Step 0 is the above; then, while nothing is found, the fallbacks in turn.
+        for step in range(5):
             if step == 1:
                 edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
             elif step == 2 and p.hidden_edge_corners:
@@ -1395,14 +1392,18 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 single_halves(&fr, &p, &halves, &found)
             elif step == 4 and room_seen:
                 hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
-            if found.count:
-                break
-        else:
-            return [], len(STEPS)
-        obstacles = []
-        for members in group_by_ovps(&found, p.merge_deg):
-            obstacles.append(obstacle(&fr, &p, s, lines, members, &found, pc, cs, cn, &vps[2, 0]))
-        return obstacles, step
+            if found.count == 0:
+                continue
+            obstacles = []
+            for members in group_by_ovps(&found, p.merge_deg):
+                o = obstacle(&fr, &p, s, lines, members, &found, pc, cs, cn, &vps[2, 0])
+                # Edge-on at every corner: a line on the floor aimed at the camera's foot.
+                if edge_on_worst(&fr, o[1], o[0]) >= p.edge_on_deg:
+                    obstacles.append(o)
+            if obstacles:
+                return obstacles
+            found.count = 0
+        return []
     finally:
         free(found.items)
         free(halves.items)

@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from companion.vision._obstacles import STEPS, find
 from companion.vision._obstacles import edge_on_angle as _edge_on_angle
+from companion.vision._obstacles import find
 from companion.vision._obstacles import fit_box_ovps as _fit_box_ovps
 from companion.vision.corners import Corners
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs
@@ -130,19 +130,11 @@ def find_obstacles(
     Output: a list of :class:`Obstacle`, possibly empty.
     """
     p = params or ObstacleParams()
-    obstacles: list[Obstacle] = []
-    first_step = 0
-    while first_step < len(STEPS):
-        found, step = find(segments, corners.points_px, corners.s, corners.n, corners.r,
-                           layout.vps, layout.focal_px, layout.centre[0], layout.centre[1],
-                           free, labels, V3, p, radius_px, leg_gap_frac,
-                           math.sin(math.radians(min_leg_angle_deg)),
-                           layout.observed[V1] and layout.observed[V2], noise_px, first_step)
-        obstacles = [o for o in (Obstacle(*fields) for fields in found)
-                     if edge_on_angle_deg(o, layout) >= p.edge_on_deg]
-        if obstacles:
-            break
-        first_step = step + 1  # what that step found was lines on the floor: the next one
+    found = find(segments, corners.points_px, corners.s, corners.n, corners.r, layout.vps,
+                 layout.focal_px, layout.centre[0], layout.centre[1], free, labels, V3, p,
+                 radius_px, leg_gap_frac, math.sin(math.radians(min_leg_angle_deg)),
+                 layout.observed[V1] and layout.observed[V2], noise_px)
+    obstacles = [Obstacle(*fields) for fields in found]
     obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles
 
