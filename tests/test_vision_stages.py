@@ -786,6 +786,39 @@ def test_a_rug_corner_with_a_side_aimed_at_the_cameras_foot_is_no_hidden_edge_co
     assert found(ObstacleParams()) == []
 
 
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_a_rug_corner_at_a_poles_foot_with_both_sides_on_one_side_is_no_box(mirrored):
+    # A rotated rug lies beside a pole (a door frame's or an aligned box's edge), its
+    # corner at the pole's foot. The rug's two sides leave that corner toward the same side
+    # of the pole: at a convex box's foot the two bottom edges in sight bound the two faces
+    # in sight and leave toward opposite sides. A real box's foot corner is still found.
+    from companion.vision.obstacles import find_obstacles
+
+    a = np.radians(35.0)
+    s = -1.0 if mirrored else 1.0
+    u = np.array([s * np.cos(a), 0.0, np.sin(a)])  # away, to one side
+    w = np.array([s * np.sin(a), 0.0, -np.cos(a)])  # toward the camera, to the same side
+    p0, up = np.array([-0.3 * s, 1.2, 4.0]), np.array([0.0, -1.0, 0.0])
+    foot, top, end_u, end_w = _project([p0, p0 + up, p0 + 1.0 * u, p0 + 0.8 * w])
+    labels = np.array([V3, NONE, NONE])
+
+    rug = np.array([[*foot, *top], [*foot, *end_u], [*foot, *end_w]])
+    corners = find_corners(rug, labels)
+    assert len(corners) >= 1  # a Table-I corner: a vertical edge and two free legs
+    assert find_obstacles(rug, corners, _room_layout(), labels == NONE, labels) == []
+
+    # The same pole's foot as a box's: its faces' bottom edges leave toward either side.
+    v = np.array([-w[0], 0.0, -w[2]])  # the other face runs away, to the other side
+    end_v, = _project([p0 + 0.8 * v])
+    box = np.array([[*foot, *top], [*foot, *end_u], [*foot, *end_v]])
+    found = find_obstacles(box, find_corners(box, labels), _room_layout(), labels == NONE,
+                           labels)
+    assert len(found) == 1
+    dirs = direction_of(found[0].ovps[:2], F, C)
+    for face in (u, v):
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+
+
 def test_a_box_seen_with_one_face_edge_on_at_one_corner_is_still_found():
     # The camera in the plane of the box's other face, through the near corner: that
     # corner is edge-on, the face's far corner is not, as a rug's side never shows.

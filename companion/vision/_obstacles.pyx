@@ -855,6 +855,21 @@ cdef bint _split(double[:, ::1] s, Py_ssize_t a, Py_ssize_t b, double x, double 
     return True
 
 
+cdef inline bint foot_legs_apart(Frame* fr, double[:, ::1] s, double x, double y,
+                                 double fx, double fy, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
+    """Whether a corner at (x, y) whose vertical edge rises to (fx, fy) can be a box's foot:
+    its legs ``a``, ``b`` leave toward opposite sides of the edge. At the foot of a convex
+    box seen from above the floor, the two bottom edges in sight bound the two faces in
+    sight, one on each side of the edge between them (the other face's bottom edge is
+    behind the box). Two legs on one side at the foot are a flat thing's, a rug's corner
+    or a shadow's, beside something vertical. A corner below its edge's far end is at the
+    edge's foot; at the top, seen from above, a box's top face does put both legs on one
+    side, so only the foot is tested."""
+    if below_horizon(fr, fx, fy) >= below_horizon(fr, x, y):
+        return True
+    return (_side(s, a, x, y, fx - x, fy - y) > 0) != (_side(s, b, x, y, fx - x, fy - y) > 0)
+
+
 cdef inline double _side(double[:, ::1] s, Py_ssize_t i, double x, double y, double ex,
                          double ey) noexcept nogil:
     """Sine of the angle from the edge direction to segment ``i`` leaving (x, y) along it
@@ -1351,7 +1366,8 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
             # end (eqs. 6, 7), where the non-Manhattan legs form C_h.
             far_ends(s, lines, pc, cr, verticals, &p, far, reach, usable)
             for g in range(nc):
-                if not usable[g]:
+                if not usable[g] or not foot_legs_apart(&fr, s, pc[g, 0], pc[g, 1],
+                                                        far[g, 0], far[g, 1], cs[g], cn[g]):
                     continue
                 nh = partner_legs(s, lines, pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
                                   reach[g], cs[g], cn[g], free_idx, &p, partners)
