@@ -678,7 +678,9 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
     either of its ends, it is the edge of a Manhattan thing (a door frame, an aligned box)
     that a rug or a shadow only touches. An edge labelled V1 or V2 that points at one of
     the two OVPs is no such proof: near the horizon the box's own top edges are labelled
-    so. Per junction, its first such pair."""
+    so. At a junction below the unseen edge, its legs leave toward either side of it
+    (:func:`foot_legs_apart`, the edge rising from the junction as the seen one rises from
+    the leg's far end). Per junction, its first such pair."""
     cdef double d1[3]
     cdef double d2[3]
     cdef double o1[3]
@@ -713,6 +715,11 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                 if hypot(ex - x, ey - y) <= 2 * p.radius_px:
                     continue  # the edge starts at the junction itself
                 if room_edge_at(s, lengths, chain, room_idx, o1, o2, p):
+                    continue
+                # The unseen edge rises from the junction as the seen one from the leg's
+                # far end (or falls, at a top): a foot's legs leave it toward either side.
+                if not foot_legs_apart(fr, s, x, y, x + chain[2 - 2 * end] - ex,
+                                       y + chain[3 - 2 * end] - ey, a, b):
                     continue
                 h = new_hypothesis(found)
                 set_ovps(h, d1, d2, ortho, chain[4])
@@ -864,7 +871,7 @@ cdef inline bint foot_legs_apart(Frame* fr, double[:, ::1] s, double x, double y
     behind the box). Two legs on one side at the foot are a flat thing's, a rug's corner
     or a shadow's, beside something vertical. A corner below its edge's far end is at the
     edge's foot; at the top, seen from above, a box's top face does put both legs on one
-    side, so only the foot is tested."""
+    side, so only the foot is tested. A leg along the edge itself is on neither side."""
     if below_horizon(fr, fx, fy) >= below_horizon(fr, x, y):
         return True
     return (_side(s, a, x, y, fx - x, fy - y) > 0) != (_side(s, b, x, y, fx - x, fy - y) > 0)
