@@ -871,7 +871,8 @@ cdef inline bint foot_legs_apart(Frame* fr, double[:, ::1] s, double x, double y
     behind the box). Two legs on one side at the foot are a flat thing's, a rug's corner
     or a shadow's, beside something vertical. A corner below its edge's far end is at the
     edge's foot; at the top, seen from above, a box's top face does put both legs on one
-    side, so only the foot is tested. A leg along the edge itself is on neither side."""
+    side, so only the foot is tested. A leg along the edge itself (sine 0) counts with
+    those of negative sine."""
     if below_horizon(fr, fx, fy) >= below_horizon(fr, x, y):
         return True
     return (_side(s, a, x, y, fx - x, fy - y) > 0) != (_side(s, b, x, y, fx - x, fy - y) > 0)
