@@ -714,12 +714,12 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                 ex, ey = (chain[0], chain[1]) if end == 0 else (chain[2], chain[3])
                 if hypot(ex - x, ey - y) <= 2 * p.radius_px:
                     continue  # the edge starts at the junction itself
-                if room_edge_at(s, lengths, chain, room_idx, o1, o2, p):
-                    continue
                 # The unseen edge rises from the junction as the seen one from the leg's
                 # far end (or falls, at a top): a foot's legs leave it toward either side.
                 if not foot_legs_apart(fr, s, x, y, x + chain[2 - 2 * end] - ex,
                                        y + chain[3 - 2 * end] - ey, a, b):
+                    continue
+                if room_edge_at(s, lengths, chain, room_idx, o1, o2, p):
                     continue
                 h = new_hypothesis(found)
                 set_ovps(h, d1, d2, ortho, chain[4])
@@ -863,7 +863,7 @@ cdef bint _split(double[:, ::1] s, Py_ssize_t a, Py_ssize_t b, double x, double 
 
 
 cdef inline bint foot_legs_apart(Frame* fr, double[:, ::1] s, double x, double y,
-                                 double fx, double fy, Py_ssize_t a, Py_ssize_t b) noexcept nogil:
+                                 double fx, double fy, Py_ssize_t a, Py_ssize_t b) noexcept:
     """Whether a corner at (x, y) whose vertical edge rises to (fx, fy) can be a box's foot:
     its legs ``a``, ``b`` leave toward opposite sides of the edge. At the foot of a convex
     box seen from above the floor, the two bottom edges in sight bound the two faces in
@@ -872,10 +872,11 @@ cdef inline bint foot_legs_apart(Frame* fr, double[:, ::1] s, double x, double y
     or a shadow's, beside something vertical. A corner below its edge's far end is at the
     edge's foot; at the top, seen from above, a box's top face does put both legs on one
     side, so only the foot is tested. A leg along the edge itself (sine 0) counts with
-    those of negative sine."""
+    those of negative sine (:func:`_split` at any angle off the edge)."""
+    cdef Py_ssize_t by_side[2]
     if below_horizon(fr, fx, fy) >= below_horizon(fr, x, y):
         return True
-    return (_side(s, a, x, y, fx - x, fy - y) > 0) != (_side(s, b, x, y, fx - x, fy - y) > 0)
+    return _split(s, a, b, x, y, fx - x, fy - y, 0.0, by_side)
 
 
 cdef inline double _side(double[:, ::1] s, Py_ssize_t i, double x, double y, double ex,
