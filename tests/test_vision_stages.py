@@ -788,6 +788,17 @@ def test_a_rug_corner_with_a_side_aimed_at_the_cameras_foot_is_no_hidden_edge_co
     assert found(ObstacleParams()) == []
 
 
+def _rug_corner_sides(mirrored):
+    """The floor directions of a rug's two sides at a corner, both toward one side (+x, or
+    −x ``mirrored``): ``u`` away from the camera, ``w`` toward it; and ``v`` = −w, the
+    direction that would put the two sides on either side of the corner, as a box's are."""
+    a = np.radians(35.0)
+    s = -1.0 if mirrored else 1.0
+    u = np.array([s * np.cos(a), 0.0, np.sin(a)])
+    w = np.array([s * np.sin(a), 0.0, -np.cos(a)])
+    return s, u, w, -w
+
+
 @pytest.mark.parametrize("mirrored", [False, True])
 def test_a_rug_corner_at_a_poles_foot_with_both_sides_on_one_side_is_no_box(mirrored):
     # A rotated rug lies beside a pole (a door frame's or an aligned box's edge), its
@@ -796,10 +807,7 @@ def test_a_rug_corner_at_a_poles_foot_with_both_sides_on_one_side_is_no_box(mirr
     # in sight and leave toward opposite sides. A real box's foot corner is still found.
     from companion.vision.obstacles import find_obstacles
 
-    a = np.radians(35.0)
-    s = -1.0 if mirrored else 1.0
-    u = np.array([s * np.cos(a), 0.0, np.sin(a)])  # away, to one side
-    w = np.array([s * np.sin(a), 0.0, -np.cos(a)])  # toward the camera, to the same side
+    s, u, w, v = _rug_corner_sides(mirrored)
     p0, up = np.array([-0.3 * s, 1.2, 4.0]), np.array([0.0, -1.0, 0.0])
     foot, top, end_u, end_w = _project([p0, p0 + up, p0 + 1.0 * u, p0 + 0.8 * w])
     labels = np.array([V3, NONE, NONE])
@@ -810,7 +818,6 @@ def test_a_rug_corner_at_a_poles_foot_with_both_sides_on_one_side_is_no_box(mirr
     assert find_obstacles(rug, corners, _room_layout(), labels == NONE, labels) == []
 
     # The same pole's foot as a box's: its faces' bottom edges leave toward either side.
-    v = np.array([-w[0], 0.0, -w[2]])  # the other face runs away, to the other side
     end_v, = _project([p0 + 0.8 * v])
     box = np.array([[*foot, *top], [*foot, *end_u], [*foot, *end_v]])
     found = find_obstacles(box, find_corners(box, labels), _room_layout(), labels == NONE,
@@ -828,10 +835,7 @@ def test_a_rug_corner_with_both_sides_on_one_side_is_no_hidden_edge_corner(mirro
     # unseen edge rising from it would have both faces on one side.
     from companion.vision.obstacles import ObstacleParams, find_obstacles
 
-    a = np.radians(35.0)
-    s = -1.0 if mirrored else 1.0
-    u = np.array([s * np.cos(a), 0.0, np.sin(a)])
-    w = np.array([s * np.sin(a), 0.0, -np.cos(a)])
+    s, u, w, v = _rug_corner_sides(mirrored)
     p0 = np.array([-0.5 * s, 1.2, 4.0])
     corner, end_u, pole, top = _project([p0, p0 + 0.8 * w, p0 + 1.0 * u,
                                          p0 + 1.0 * u + [0.0, -1.0, 0.0]])
@@ -847,7 +851,6 @@ def test_a_rug_corner_with_both_sides_on_one_side_is_no_hidden_edge_corner(mirro
     assert found(ObstacleParams()) == []
 
     # The sides turned to leave the corner toward either side: a box's near corner.
-    v = np.array([-w[0], 0.0, -w[2]])
     end_v, = _project([p0 + 0.8 * v])
     box = np.array([[*corner, *end_v], [*corner, *pole], [*pole, *top]])
     assert len(find_obstacles(box, find_corners(box, labels), _room_layout(), labels == NONE,
