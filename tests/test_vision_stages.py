@@ -242,6 +242,40 @@ def test_converging_floor_lines_are_not_taken_for_verticals():
     assert far
 
 
+def _pitched_floor_and_box(pitch_deg, yaw_deg):
+    """Image segments of a floor with seams along two axes ``yaw_deg`` off the view, in
+    pieces 0.5 m long every 0.6 m, and the three vertical edges (0.7 m) of a box 3 m
+    ahead, seen from 1.2 m by a camera pitched ``pitch_deg`` nose down. Returns the
+    segments and the true down direction in the camera frame."""
+    t, a = np.radians(pitch_deg), np.radians(yaw_deg)
+    # A level camera's frame (x right, y down, z forward) → the pitched camera's.
+    rot = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(t), -np.sin(t)], [0.0, np.sin(t), np.cos(t)]])
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    floor = np.array([0.0, 1.2, 4.0])
+    pieces = [(floor + k * n + s * d, 0.5 * d) for k in np.arange(-8, 9) * 0.6
+              for s in np.arange(-8, 8, 0.6) for d, n in ((u, v), (v, u))]
+    feet = np.array([0.2, 1.2, 3.0]) + np.array([[0.0, 0.0, 0.0], 0.6 * u, -0.5 * v])
+    pieces += [(foot, np.array([0.0, -0.7, 0.0])) for foot in feet]
+    a3 = np.array([p for p, _ in pieces]) @ rot.T
+    b3 = np.array([p + d for p, d in pieces]) @ rot.T
+    front = (a3[:, 2] > 0.3) & (b3[:, 2] > 0.3)
+    segs = np.hstack([_project(a3[front]), _project(b3[front])])
+    inside = np.all((segs >= 0) & (segs < [W, H, W, H]), axis=1)
+    return segs[inside], rot @ [0.0, 1.0, 0.0]
+
+
+@pytest.mark.parametrize("pitch_deg", [20.0, 25.0])
+def test_a_camera_pitched_down_finds_v3_among_floor_lines_that_look_vertical(pitch_deg):
+    # Below a camera pitched down, floor lines running toward V2 are near-vertical in the
+    # image, long and many; the box's three short vertical edges are outscored, and no
+    # pair of them is among the V3 hypotheses. The horizontal VPs fix V3 as the direction
+    # at a right angle to both, which is tried as a hypothesis too.
+    segs, down = _pitched_floor_and_box(pitch_deg, 25.0)
+    layout = detect_layout_vps(segs, W, H, F)
+    assert layout.observed == (True, True, True)
+    assert angle_between_directions_deg(direction_of(layout.vps[V3], F, C), down) < 0.5
+
+
 def test_a_nearby_obstacle_family_does_not_pull_a_layout_vp():
     # A rotated obstacle's horizontal edges, 5° in azimuth from the room's V1 axis: each
     # VP is fitted on the segments that point at it best, so those of the obstacle that

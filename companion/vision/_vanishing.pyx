@@ -343,7 +343,8 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     ``vertical_alternatives`` distinct V3 hypotheses, and straight down, are each
     completed with their horizontal VPs, and the frame with the most support (V3, V1 and
     V2 together) wins, so that two long oblique lines that happen to meet below the image
-    do not pass for the vertical when the horizontal structure says otherwise.
+    do not pass for the vertical when the horizontal structure says otherwise. The
+    winner's V1 × V2 is completed as one more V3 hypothesis.
 
     Returns ``(vps 3×3, observed (v1, v2, v3), supports 3, others K×3, others_support K)``:
     rows V1 (LMVP), V2, V3 and the further horizontal VPs as unit homogeneous pixel points.
@@ -406,6 +407,19 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
             frame = horizontal_frame(ns, lines, lengths, focal, &p, v3, ok, inl)
             if best is None or frame[0] > best[0]:
                 best = frame
+        # The horizontal VPs, resting on many long edges, fix V3 as the direction ⟂ both.
+        # Where the true verticals are few and short, no pair of them may be among the
+        # hypotheses above: below a camera pitched down, floor lines running toward V2
+        # are near-vertical too and outscore them. So the best frame's V1 × V2 is tried.
+        if best[2][0] and best[2][1]:
+            hv = best[1]
+            cross3(&hv[0, 0], &hv[1, 0], v3)
+            if unit3(v3) > 0 and abs(v3[1]) >= cos(radians(p.vertical_max_camera_tilt_deg)) \
+                    and refine_vertical(ns, lines, focal, &p, &is_cand[0], v3, inl) \
+                    and new_direction(v3, refined, &nrefined, SAME_V3_DEG):
+                frame = horizontal_frame(ns, lines, lengths, focal, &p, v3, True, inl)
+                if frame[0] > best[0]:
+                    best = frame
     _, dirs, observed, supports, other_dirs, other_support = best
     cdef double[:, ::1] d = dirs
     polish(ns, lines, focal, &p, d, observed, other_dirs)

@@ -8,7 +8,10 @@ that needs no calibration beyond a rough focal length and never divides by zero:
    scored MSAC-style by the length of the segments that point at it. The best few
    (``vertical_alternatives``) and straight down (a level camera) are each refined by
    least squares over their inliers and completed into a frame (steps 2–3); the frame
-   with the most support, V3's and V1's and V2's together, is the layout.
+   with the most support, V3's and V1's and V2's together, is the layout. Its V1 × V2,
+   the direction at a right angle to both, is then completed too and wins if better
+   supported: below a camera pitched down, floor lines toward V2 look near-vertical, and
+   a box's few short vertical edges may make no hypothesis of their own.
 2. **Horizontal VPs.** Every horizontal direction in the world images onto the horizon,
    the line polar to V3. Each remaining segment crosses the horizon at one point, which is
    the VP it would have if it were a horizontal edge; that point is a single angle θ (the
