@@ -102,6 +102,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="with --renderer: each split room seen from the height of its "
                          "rotated obstacle's top, as a vehicle flying at the furniture's "
                          "height sees it (the top edge-on, along the horizon)")
+    ev.add_argument("--pitch", type=float, default=0.0, metavar="DEG",
+                    help="with --renderer: each split room seen by the camera pitched DEG "
+                         "further nose down (-30 to 30), as a multicopter's fixed camera "
+                         "sees it while it accelerates forward")
     ev.add_argument("--clips", action="store_true",
                     help="with --renderer: per-frame and tracked η on yawing clips")
     ev.add_argument("--long", action="store_true",
@@ -258,6 +262,10 @@ def run_eval(args) -> int:
         raise UserError("--mirrored goes with --renderer NAME or --yud DIR (not --variants)")
     if args.eye_level and (args.clips or not args.renderer):
         raise UserError("--eye-level goes with --renderer NAME (not --clips)")
+    if args.pitch and (args.clips or not args.renderer):
+        raise UserError("--pitch goes with --renderer NAME (not --clips)")
+    if not -30.0 <= args.pitch <= 30.0:
+        raise UserError(f"--pitch {args.pitch:g}: give -30 to 30 degrees")
     if args.yud:
         args.split = {"dev": "train", None: "test"}.get(args.split, args.split)
         return run_eval_yud(args)
@@ -333,11 +341,11 @@ def run_eval_splits(args) -> int:
                                        lambda d, t, p=progress, r=renderer, s=s: p.update(
                                            d, t, f"{r} {s}"), focal_given=args.focal_given,
                                        lens_given=args.lens_given, mirrored=args.mirrored,
-                                       eye_level=args.eye_level)
+                                       eye_level=args.eye_level, pitch_deg=args.pitch)
             finally:
                 progress.close()
         for line in format_splits(renderer, reports, args.focal_given, args.lens_given,
-                                  args.mirrored, args.eye_level):
+                                  args.mirrored, args.eye_level, args.pitch):
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
@@ -347,7 +355,8 @@ def run_eval_splits(args) -> int:
           + (" --focal-given" if args.focal_given else "")
           + (" --lens-given" if args.lens_given else "")
           + (" --mirrored" if args.mirrored else "")
-          + (" --eye-level" if args.eye_level else "") + ")")
+          + (" --eye-level" if args.eye_level else "")
+          + (f" --pitch {args.pitch:g}" if args.pitch else "") + ")")
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)

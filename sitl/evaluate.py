@@ -216,24 +216,26 @@ def _cache_dir() -> Path:
 
 def draw_scene(renderer: str, seed: int, index: int, obstacle_share: float = 0.7,
                width: int = 640, height: int = 480, hfov_deg: float | None = None,
-               mirrored: bool = False, eye_level: bool = False):
+               mirrored: bool = False, eye_level: bool = False, pitch_deg: float = 0.0):
     """Scene ``index`` of ``seed`` drawn by ``renderer``: (image BGR, :class:`SceneTruth`).
     Path-traced frames are cached on disk. ``mirrored``: the frame and its truth mirrored
     left to right (:func:`sitl.scene.mirror`). ``eye_level``: the same room seen from the
-    height of its rotated obstacle's top (:func:`sitl.scene.at_eye_level`)."""
+    height of its rotated obstacle's top (:func:`sitl.scene.at_eye_level`). ``pitch_deg``:
+    the same room seen by the camera pitched that much further nose down."""
     image, truth = _draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg,
-                               eye_level)
+                               eye_level, pitch_deg)
     return mirror(image, truth) if mirrored else (image, truth)
 
 
 def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float,
-                width: int, height: int, hfov_deg: float | None, eye_level: bool = False):
+                width: int, height: int, hfov_deg: float | None, eye_level: bool = False,
+                pitch_deg: float = 0.0):
     rng = np.random.default_rng([seed, index])
     has_obstacle = bool(rng.random() < obstacle_share)
     if renderer == "scene":
         scene, cam = random_scene(rng, width, height, obstacle=has_obstacle, hfov_deg=hfov_deg,
                                   eye_level=eye_level)
-        image, truth = render(scene, cam)
+        image, truth = render(scene, _pitched(cam, pitch_deg))
         return image, truth
     if renderer != "pathtraced":
         raise ValueError(f"unknown renderer {renderer!r}")
@@ -241,12 +243,20 @@ def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float,
 
     fov = "any" if hfov_deg is None else f"{hfov_deg:g}"
     eye = "eye-" if eye_level and has_obstacle else ""
-    name = f"{width}x{height}-{fov}/{eye}{seed}-{index}-share{obstacle_share:g}.png"
+    pitch = f"pitch{pitch_deg:g}-" if pitch_deg else ""
+    name = f"{width}x{height}-{fov}/{pitch}{eye}{seed}-{index}-share{obstacle_share:g}.png"
     # Small frames get more samples per pixel: the same light per unit of the scene.
     spp = 16 if width * height >= 640 * 480 else 32
     r3, cam = pathtraced.random_room(rng, width, height, obstacle=has_obstacle,
                                      hfov_deg=hfov_deg, spp=spp, eye_level=eye_level)
-    return _render_cached(name, r3, cam)
+    return _render_cached(name, r3, _pitched(cam, pitch_deg))
+
+
+def _pitched(cam, pitch_deg: float):
+    """``cam`` pitched ``pitch_deg`` further nose down (the camera's own pitch is nose up
+    positive): what a multicopter's fixed camera sees while it accelerates forward, or a
+    camera mounted tilted down."""
+    return replace(cam, pitch_deg=cam.pitch_deg - pitch_deg) if pitch_deg else cam
 
 
 def _render_cached(name: str, r3, cam):
@@ -295,11 +305,13 @@ def evaluate_scene(
     assume_lens: bool = False,
     mirrored: bool = False,
     eye_level: bool = False,
+    pitch_deg: float = 0.0,
 ) -> SceneResult:
     """Draw scene ``index`` of ``seed`` (``mirrored`` left to right, ``eye_level`` from the
-    obstacle's height, if asked), run the pipeline, compare with the truth."""
+    obstacle's height, pitched ``pitch_deg`` further nose down, if asked), run the
+    pipeline, compare with the truth."""
     image, truth = draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg,
-                              mirrored, eye_level)
+                              mirrored, eye_level, pitch_deg)
     cfg = config or Config()
     lens = assume_lens and bool(truth.distortion)
     if assume_focal or assume_lens:
@@ -365,13 +377,15 @@ def run_eval(
     assume_lens: bool = False,
     mirrored: bool = False,
     eye_level: bool = False,
+    pitch_deg: float = 0.0,
 ) -> EvalReport:
     """Evaluate ``scenes`` seeded scenes; ``progress(done, total)`` is called as they finish.
     With ``mirrored``, each scene is also evaluated mirrored left to right, and the report
     pools both: twice the results, for telling a rule change from chance on dev. With
-    ``eye_level`` each room is seen from its rotated obstacle's height."""
+    ``eye_level`` each room is seen from its rotated obstacle's height, with ``pitch_deg``
+    by the camera pitched that much further nose down."""
     jobs = [(seed, i, config, obstacle_share, width, height, assume_focal, renderer, hfov_deg,
-             assume_lens, flip, eye_level)
+             assume_lens, flip, eye_level, pitch_deg)
             for i in range(scenes) for flip in orientations(mirrored)]
     total = len(jobs)
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
@@ -430,13 +444,13 @@ def format_report(report: EvalReport) -> list[str]:
 def run_split(renderer: str, split: str, config: Config | None = None,
               workers: int | None = None, progress=None, focal_given: bool = False,
               lens_given: bool = False, mirrored: bool = False,
-              eye_level: bool = False) -> dict[str, EvalReport]:
+              eye_level: bool = False, pitch_deg: float = 0.0) -> dict[str, EvalReport]:
     """One frozen split of one renderer at every camera of :data:`CAMERAS`, focal length
     not given (unless ``focal_given``, or ``lens_given``: the focal length and the lens
     distortion, diagnoses): {camera label: report}. ``mirrored``: each frame also run
     mirrored, pooled (:func:`run_eval`). ``eye_level``: the split's rooms seen from their
-    rotated obstacle's height (:func:`sitl.scene.at_eye_level`).
-    ``progress(done, total)`` counts frames."""
+    rotated obstacle's height (:func:`sitl.scene.at_eye_level`). ``pitch_deg``: seen by the
+    camera pitched that much further nose down. ``progress(done, total)`` counts frames."""
     seed, scenes = SPLITS[(renderer, split)]
     per_camera = scenes * (2 if mirrored else 1)
     total = per_camera * len(CAMERAS)
@@ -448,7 +462,8 @@ def run_split(renderer: str, split: str, config: Config | None = None,
         out[label] = run_eval(scenes, seed, config, width=w, height=h,
                               assume_focal=focal_given,
                               workers=workers, progress=step, renderer=renderer, hfov_deg=fov,
-                              assume_lens=lens_given, mirrored=mirrored, eye_level=eye_level)
+                              assume_lens=lens_given, mirrored=mirrored, eye_level=eye_level,
+                              pitch_deg=pitch_deg)
     return out
 
 
@@ -459,7 +474,8 @@ def _split_target(label: str) -> dict[str, float]:
 
 def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
                   focal_given: bool = False, lens_given: bool = False,
-                  mirrored: bool = False, eye_level: bool = False) -> list[str]:
+                  mirrored: bool = False, eye_level: bool = False,
+                  pitch_deg: float = 0.0) -> list[str]:
     """One table for a renderer: a row per camera and split, issue 18's targets beside;
     then, per row, the obstacles seen at eye level, by furniture kind, and the range."""
 
@@ -476,6 +492,8 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
         given += "; each frame also mirrored left to right, the two pooled"
     if eye_level:
         given += "; each room seen from its rotated obstacle's height"
+    if pitch_deg:
+        given += f"; the camera pitched {pitch_deg:g}° further nose down"
     lines = [f"renderer {renderer}: focal length {given}",
              f"{'camera':<14} {'split':<5} {'seed':>5} {'det %':>6} {'η med°':>7} {'η p90°':>7} "
              f"{'FP %':>5} {'sign✗':>7} {'corner %':>8} {'f err %':>10}   targets det/med/p90"]

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from companion.config import Config
+from companion.vision.geometry import direction_of
 from companion.vision.pipeline import STAGES, Pipeline
-from sitl.evaluate import EvalReport, SceneResult, evaluate_scene
+from sitl.evaluate import EvalReport, SceneResult, draw_scene, evaluate_scene
 from sitl.sample import sample_scene
 from sitl.scene import Box, Camera, Scene, mirror, render, render_image, yaw_sweep
 
@@ -183,6 +184,22 @@ def test_evaluating_a_mirrored_frame_scores_it_against_the_mirrored_truth():
     assert flipped.eta_true_deg == pytest.approx(-plain.eta_true_deg) and plain.eta_true_deg < -10
     for r in (plain, flipped):
         assert r.eta_est_deg == pytest.approx(r.eta_true_deg, abs=1.0)
+
+
+def test_a_pitched_view_is_the_same_room_seen_nose_down_and_its_box_is_found():
+    # `companion eval --pitch 20`: room 82 of seed 0 seen by the camera pitched 20° further
+    # nose down. V3 comes 20° nearer the optical axis, and the box, 32° off the room, is
+    # found as at level (the layout once took a floor line for the vertical here).
+    def off_axis_deg(truth):
+        d = direction_of(np.array(truth.layout_vps[2]), truth.focal_px,
+                         np.array([(truth.width - 1) / 2, (truth.height - 1) / 2]))
+        return np.degrees(np.arccos(abs(d[2]) / np.linalg.norm(d)))
+
+    level, pitched = draw_scene("scene", 0, 82)[1], draw_scene("scene", 0, 82, pitch_deg=20.0)[1]
+    assert off_axis_deg(level) - off_axis_deg(pitched) == pytest.approx(20.0, abs=1.0)
+    r = evaluate_scene(0, 82, pitch_deg=20.0, assume_focal=False)
+    assert r.detectable and r.eta_true_deg < -20.0
+    assert r.eta_est_deg == pytest.approx(r.eta_true_deg, abs=1.0)
 
 
 def test_the_report_counts_detections_by_kind_and_the_focal_lengths_error():
