@@ -366,8 +366,10 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     cdef unsigned char[::1] is_cand = np.zeros(n, np.uint8)
     cdef unsigned char[::1] inl = np.zeros(n, np.uint8)
     cdef double v3[3]
+    # At most 15 alternatives and straight down are tried; each refined V3, and the best
+    # frame's V1 × V2 after them, is kept in ``refined``: one more.
     cdef double tried[16][3]
-    cdef double refined[16][3]
+    cdef double refined[17][3]
     cdef int ntried = 0, nrefined = 0
     cdef bint default_done = False, seen_before
     cdef double[:, ::1] hv
@@ -652,7 +654,7 @@ cdef tuple horizontal_frame(double[:, ::1] ns, double[:, ::1] lines, double[::1]
 cdef bint new_direction(const double* d, double (*seen)[3], int* nseen,
                         double min_deg) noexcept nogil:
     """Whether the unit direction ``d`` is at least ``min_deg`` from every direction in
-    ``seen``; if so it is added to them (room for 16)."""
+    ``seen``; if so it is added to them (the caller's array has room for it)."""
     cdef int t
     for t in range(nseen[0]):
         if angle_between_deg(d, seen[t]) < min_deg:
