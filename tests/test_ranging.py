@@ -5,6 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers.camera import tilted_camera
 
 from companion.vision.pipeline import Pipeline
 from companion.vision.ranging import (
@@ -44,12 +45,8 @@ def test_a_pitched_camera_uses_v3_not_the_image_rows():
 
 
 def _tilted_camera(pitch_deg, roll_deg):
-    """Rotation from a levelled frame (x right, y down, z forward) into a camera pitched
-    down by ``pitch_deg`` and then rolled by ``roll_deg``, and that camera's V3."""
-    p, r = math.radians(pitch_deg), math.radians(roll_deg)
-    rx = np.array([[1, 0, 0], [0, math.cos(p), math.sin(p)], [0, -math.sin(p), math.cos(p)]])
-    rz = np.array([[math.cos(r), -math.sin(r), 0], [math.sin(r), math.cos(r), 0], [0, 0, 1]])
-    rot = rz @ rx
+    """The tilted camera's rotation (:func:`helpers.camera.tilted_camera`) and its V3."""
+    rot = tilted_camera(pitch_deg, roll_deg)
     d = rot @ np.array([0.0, 1.0, 0.0])
     return rot, np.array([F * d[0] + CENTRE[0] * d[2], F * d[1] + CENTRE[1] * d[2], d[2]])
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from helpers.camera import tilted_camera
 
 from companion.vision.corners import (
     CornerParams,
@@ -247,9 +248,8 @@ def _pitched_floor_and_box(pitch_deg, yaw_deg):
     pieces 0.5 m long every 0.6 m, and the three vertical edges (0.7 m) of a box 3 m
     ahead, seen from 1.2 m by a camera pitched ``pitch_deg`` nose down. Returns the
     segments and the true down direction in the camera frame."""
-    t, a = np.radians(pitch_deg), np.radians(yaw_deg)
-    # A level camera's frame (x right, y down, z forward) → the pitched camera's.
-    rot = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(t), -np.sin(t)], [0.0, np.sin(t), np.cos(t)]])
+    a = np.radians(yaw_deg)
+    rot = tilted_camera(pitch_deg)
     u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
     floor = np.array([0.0, 1.2, 4.0])
     pieces = [(floor + k * n + s * d, 0.5 * d) for k in np.arange(-8, 9) * 0.6
