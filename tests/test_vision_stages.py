@@ -863,6 +863,36 @@ def test_a_rug_corner_at_a_poles_foot_with_both_sides_on_one_side_is_no_box(mirr
 
 
 @pytest.mark.parametrize("mirrored", [False, True])
+def test_a_rug_corner_below_a_posts_foot_on_the_rooms_floor_line_is_no_box(mirrored):
+    # A door post stands on the wall's floor line; a rotated rug's corner lies 0.6 m in
+    # front of it, 17 px below the post's foot in the image, within the share of its
+    # length by which a vertical edge may stop short of its corner. The rug's sides leave
+    # on either side, as a box's bottom edges do. But the post's own foot is where the
+    # room's floor line leaves it: the edge stands there, not on the rug's corner.
+    from companion.vision.obstacles import find_obstacles
+
+    s, u, w, v = _rug_corner_sides(mirrored)
+    foot = np.array([-0.15 * s, 1.2, 4.0])
+    corner = foot + [0.0, 0.0, -0.6]
+    foot_px, top_px, corner_px, end_u, end_v, wall_end = _project(
+        [foot, foot + [0.0, -2.0, 0.0], corner, corner + 1.0 * u, corner + 0.8 * v,
+         foot + [s * 1.0, 0.0, 0.0]])
+    assert 10.0 < np.hypot(*(corner_px - foot_px)) < 30.0
+    rug = np.array([[*foot_px, *top_px], [*corner_px, *end_u], [*corner_px, *end_v]])
+    floor_line = np.array([[*foot_px, *wall_end]])
+    labels = np.array([V3, NONE, NONE])
+
+    def found(segs, labels):
+        corners = find_corners(segs, labels)
+        assert len(corners) >= 1  # a Table-I corner: the post and two free legs
+        return find_obstacles(segs, corners, _room_layout(), labels == NONE, labels)
+
+    # Without the floor line the post could be a box's edge stopping short of its foot.
+    assert len(found(rug, labels)) == 1
+    assert found(np.vstack([rug, floor_line]), np.append(labels, V1)) == []
+
+
+@pytest.mark.parametrize("mirrored", [False, True])
 def test_a_rug_corner_with_both_sides_on_one_side_is_no_hidden_edge_corner(mirrored):
     # The same rug, its corner on the open floor, one side running on to a pole at its far
     # end: the junction would be a box's near corner whose faces are lit alike, but the

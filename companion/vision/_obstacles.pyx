@@ -759,6 +759,23 @@ cdef bint room_edge_at(double[:, ::1] s, double[::1] lengths, tuple chain,
     return False
 
 
+cdef bint stands_short(double[:, ::1] s, double[::1] lengths, Py_ssize_t r, double px,
+                       double py, double ex, double ey, double edge, Py_ssize_t[::1] room_idx,
+                       const double* o1, const double* o2, Params* p):
+    """Whether the vertical leg ``r`` of the corner at (px, py), whose edge runs to
+    (ex, ey) (``edge`` px), ends more than ``radius_px`` short of the corner, at a point
+    a room edge leaves (:func:`room_edge_at`): the edge's own foot or head is there, on a
+    room line, and the corner is something else's. At the corner itself the room edges a
+    box hides end too, so only an end apart from it can tell."""
+    cdef double qx = s[r, 0], qy = s[r, 1]
+    if (s[r, 2] - px) ** 2 + (s[r, 3] - py) ** 2 < (qx - px) ** 2 + (qy - py) ** 2:
+        qx, qy = s[r, 2], s[r, 3]
+    if hypot(qx - px, qy - py) <= p.radius_px:
+        return False
+    return room_edge_at(s, lengths, (ex, ey, qx, qy, hypot(ex - qx, ey - qy)), room_idx, o1,
+                        o2, p, False)
+
+
 cdef list leg_junctions(double[:, ::1] s, double[:, ::1] lines, double[::1] lengths,
                         Py_ssize_t[::1] free_idx, double min_leg_sin, Params* p):
     """Two obstacle legs whose ends meet at their intersection, at least
@@ -1389,12 +1406,17 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                     if reach[g] < 2 * p.min_edge_px or not horizon_ovps(
                             &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3):
                         continue
+                    pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+                    pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
                     if not at_border(&fr, far[g, 0], far[g, 1], p.radius_px):
-                        pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
-                        pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
                         if room_edge_at(s, lengths, (pc[g, 0], pc[g, 1], far[g, 0], far[g, 1],
                                                      reach[g]), room_idx, o1, o2, &p, False):
                             continue
+                    # An edge that stops short of C_g and stands on a room edge there is
+                    # a door post's or an aligned box's; C_g below it, a rug's corner.
+                    if stands_short(s, lengths, cr[g], pc[g, 0], pc[g, 1], far[g, 0],
+                                    far[g, 1], reach[g], room_idx, o1, o2, &p):
+                        continue
                 h = new_hypothesis(&found)
                 set_ovps(h, d1, d2, lam3, reach[g])
                 h.corner = g
