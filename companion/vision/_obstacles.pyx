@@ -760,10 +760,10 @@ cdef bint room_edge_at(double[:, ::1] s, double[::1] lengths, tuple chain,
 
 
 cdef bint stands_short(double[:, ::1] s, double[::1] lengths, Py_ssize_t r, double px,
-                       double py, double ex, double ey, double edge, Py_ssize_t[::1] room_idx,
+                       double py, double ex, double ey, Py_ssize_t[::1] room_idx,
                        const double* o1, const double* o2, Params* p):
     """Whether the vertical leg ``r`` of the corner at (px, py), whose edge runs to
-    (ex, ey) (``edge`` px), ends more than ``radius_px`` short of the corner, at a point
+    (ex, ey), ends more than ``radius_px`` short of the corner, at a point
     a room edge leaves (:func:`room_edge_at`): the edge's own foot or head is there, on a
     room line, and the corner is something else's. At the corner itself the room edges a
     box hides end too, so only an end apart from it can tell."""
@@ -1415,7 +1415,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                     # An edge that stops short of C_g and stands on a room edge there is
                     # a door post's or an aligned box's; C_g below it, a rug's corner.
                     if stands_short(s, lengths, cr[g], pc[g, 0], pc[g, 1], far[g, 0],
-                                    far[g, 1], reach[g], room_idx, o1, o2, &p):
+                                    far[g, 1], room_idx, o1, o2, &p):
                         continue
                 h = new_hypothesis(&found)
                 set_ovps(h, d1, d2, lam3, reach[g])
