@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from companion.config import Config
-from companion.vision.geometry import direction_of
+from companion.vision.geometry import direction_of, principal_point
 from companion.vision.pipeline import STAGES, Pipeline
 from sitl.evaluate import EvalReport, SceneResult, draw_scene, evaluate_scene
 from sitl.sample import sample_scene
@@ -192,7 +192,7 @@ def test_a_pitched_view_is_the_same_room_seen_nose_down_and_its_box_is_found():
     # found as at level (the layout once took a floor line for the vertical here).
     def off_axis_deg(truth):
         d = direction_of(np.array(truth.layout_vps[2]), truth.focal_px,
-                         np.array([(truth.width - 1) / 2, (truth.height - 1) / 2]))
+                         principal_point(truth.width, truth.height))
         return np.degrees(np.arccos(abs(d[2]) / np.linalg.norm(d)))
 
     level, pitched = draw_scene("scene", 0, 82)[1], draw_scene("scene", 0, 82, pitch_deg=20.0)[1]
