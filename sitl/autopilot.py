@@ -39,11 +39,13 @@ import argparse
 import contextlib
 import logging
 import math
+import random
 import socket
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -673,9 +675,38 @@ class MockAutopilot:
 
 
 
+def _ephemeral_port_range() -> tuple[int, int]:
+    """The ports the kernel hands to sockets bound to port 0 (Linux's range, else its default)."""
+    try:
+        low, high = map(int, Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split())
+    except (OSError, ValueError):
+        low, high = 32768, 60999
+    return low, high
+
+
+_port_choice = random.Random()  # its own generator: a test seeding `random` must not pin ports
+
+
 def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that nothing is bound to right now (for a mock's link)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+    """A UDP port on 127.0.0.1 that nothing is bound to now, outside the ephemeral range.
+
+    Outside it because the port is only reserved by its number: between this call and the
+    listener's bind, any socket bound to port 0 (the mock's own, MAVSDK's, another
+    process's) could be handed an ephemeral port, and so once in a few thousand calls
+    this very one (a CI run failed on it with MAVSDK's BIND_ERROR).
+    """
+    low, high = _ephemeral_port_range()
+    spans = [span for span in (range(20000, low), range(high + 1, 65536)) if len(span) > 100]
+    for _ in range(200 if spans else 0):
+        span = _port_choice.choice(spans)
+        port = _port_choice.choice(span)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:  # no room outside it
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 

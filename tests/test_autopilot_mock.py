@@ -172,3 +172,19 @@ def test_junk_and_wrong_targets_are_ignored_without_crashing(client):
         # still alive and answering
         assert client.command(mavlink.MAV_CMD_NAV_LAND) == mavlink.MAV_RESULT_ACCEPTED
         assert ap.wait_for(lambda: ap.mode.sub == 6, 0.5)
+
+
+def test_a_free_port_for_a_listener_is_never_one_a_port_0_bind_could_be_handed():
+    """free_udp_port reserves by number only; a socket bound to port 0 before the listener
+    binds must not be able to take it, so it comes from outside the ephemeral range."""
+    from sitl.autopilot import _ephemeral_port_range, free_udp_port
+
+    low, high = _ephemeral_port_range()
+    taken = []
+    for _ in range(50):
+        port = free_udp_port()
+        assert not low <= port <= high
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", port))  # free, as promised
+            taken.append(s.getsockname()[1])
+    assert len(set(taken)) > 40  # drawn, not one fixed port
