@@ -255,7 +255,7 @@ def dry_run(args) -> int:
 
 def run_eval(args) -> int:
     """``companion eval``: render seeded scenes, print the accuracy figures."""
-    from sitl.evaluate import format_report
+    from sitl.evaluate import View, format_report
     from sitl.evaluate import run_eval as evaluate
 
     if args.mirrored and (args.variants or not (args.renderer or args.yud)):
@@ -290,8 +290,7 @@ def run_eval(args) -> int:
             scenes=args.scenes,
             seed=args.seed,
             config=cfg,
-            width=args.width,
-            height=args.height,
+            view=View(args.width, args.height),
             assume_focal=not args.no_focal,
             workers=args.workers,
             progress=lambda d, n: progress.update(d, n, "scenes"),

@@ -60,7 +60,7 @@ from sitl.scene import (
     render,
 )
 
-__all__ = ["SceneResult", "EvalReport", "evaluate_scene", "run_eval", "format_report",
+__all__ = ["View", "SceneResult", "EvalReport", "evaluate_scene", "run_eval", "format_report",
            "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
            "run_clips", "clip_figures", "format_clips"]
 
@@ -93,6 +93,22 @@ SPLIT_TARGETS = {
     320: {"detection_rate": 0.85, "eta_err_median_deg": 1.5, "eta_err_p90_deg": 4.5},
 }
 """issue 18's targets: 640×480 at 90° and at 60°, and 320×240 (keyed by width)."""
+
+
+@dataclass(frozen=True)
+class View:
+    """How a seeded room is seen: a camera of ``width``×``height`` pixels and ``hfov_deg``
+    of horizontal field of view (None: the room's own draw), the frame ``mirrored`` left to
+    right (:func:`sitl.scene.mirror`), from the height of the rotated obstacle's top
+    (``eye_level``, :func:`sitl.scene.at_eye_level`), pitched ``pitch_deg`` further nose
+    down."""
+
+    width: int = 640
+    height: int = 480
+    hfov_deg: float | None = None
+    mirrored: bool = False
+    eye_level: bool = False
+    pitch_deg: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -215,41 +231,35 @@ def _cache_dir() -> Path:
 
 
 def draw_scene(renderer: str, seed: int, index: int, obstacle_share: float = 0.7,
-               width: int = 640, height: int = 480, hfov_deg: float | None = None,
-               mirrored: bool = False, eye_level: bool = False, pitch_deg: float = 0.0):
-    """Scene ``index`` of ``seed`` drawn by ``renderer``: (image BGR, :class:`SceneTruth`).
-    Path-traced frames are cached on disk. ``mirrored``: the frame and its truth mirrored
-    left to right (:func:`sitl.scene.mirror`). ``eye_level``: the same room seen from the
-    height of its rotated obstacle's top (:func:`sitl.scene.at_eye_level`). ``pitch_deg``:
-    the same room seen by the camera pitched that much further nose down."""
-    image, truth = _draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg,
-                               eye_level, pitch_deg)
-    return mirror(image, truth) if mirrored else (image, truth)
+               view: View = View()):
+    """Scene ``index`` of ``seed`` drawn by ``renderer`` as ``view`` sees it: (image BGR,
+    :class:`SceneTruth`). Path-traced frames are cached on disk; a mirrored view is the
+    frame and its truth mirrored, so it shares the cached frame."""
+    image, truth = _draw_scene(renderer, seed, index, obstacle_share, view)
+    return mirror(image, truth) if view.mirrored else (image, truth)
 
 
-def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float,
-                width: int, height: int, hfov_deg: float | None, eye_level: bool = False,
-                pitch_deg: float = 0.0):
+def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float, view: View):
     rng = np.random.default_rng([seed, index])
     has_obstacle = bool(rng.random() < obstacle_share)
+    w, h = view.width, view.height
     if renderer == "scene":
-        scene, cam = random_scene(rng, width, height, obstacle=has_obstacle, hfov_deg=hfov_deg,
-                                  eye_level=eye_level)
-        image, truth = render(scene, _pitched(cam, pitch_deg))
-        return image, truth
+        scene, cam = random_scene(rng, w, h, obstacle=has_obstacle, hfov_deg=view.hfov_deg,
+                                  eye_level=view.eye_level)
+        return render(scene, _pitched(cam, view.pitch_deg))
     if renderer != "pathtraced":
         raise ValueError(f"unknown renderer {renderer!r}")
     from sitl import pathtraced
 
-    fov = "any" if hfov_deg is None else f"{hfov_deg:g}"
-    eye = "eye-" if eye_level and has_obstacle else ""
-    pitch = f"pitch{pitch_deg:g}-" if pitch_deg else ""
-    name = f"{width}x{height}-{fov}/{pitch}{eye}{seed}-{index}-share{obstacle_share:g}.png"
+    fov = "any" if view.hfov_deg is None else f"{view.hfov_deg:g}"
+    eye = "eye-" if view.eye_level and has_obstacle else ""
+    pitch = f"pitch{view.pitch_deg:g}-" if view.pitch_deg else ""
+    name = f"{w}x{h}-{fov}/{pitch}{eye}{seed}-{index}-share{obstacle_share:g}.png"
     # Small frames get more samples per pixel: the same light per unit of the scene.
-    spp = 16 if width * height >= 640 * 480 else 32
-    r3, cam = pathtraced.random_room(rng, width, height, obstacle=has_obstacle,
-                                     hfov_deg=hfov_deg, spp=spp, eye_level=eye_level)
-    return _render_cached(name, r3, _pitched(cam, pitch_deg))
+    spp = 16 if w * h >= 640 * 480 else 32
+    r3, cam = pathtraced.random_room(rng, w, h, obstacle=has_obstacle, hfov_deg=view.hfov_deg,
+                                     spp=spp, eye_level=view.eye_level)
+    return _render_cached(name, r3, _pitched(cam, view.pitch_deg))
 
 
 def _pitched(cam, pitch_deg: float):
@@ -297,21 +307,16 @@ def evaluate_scene(
     index: int,
     config: Config | None = None,
     obstacle_share: float = 0.7,
-    width: int = 640,
-    height: int = 480,
+    view: View = View(),
     assume_focal: bool = True,
     renderer: str = "scene",
-    hfov_deg: float | None = None,
     assume_lens: bool = False,
-    mirrored: bool = False,
-    eye_level: bool = False,
-    pitch_deg: float = 0.0,
 ) -> SceneResult:
-    """Draw scene ``index`` of ``seed`` (``mirrored`` left to right, ``eye_level`` from the
-    obstacle's height, pitched ``pitch_deg`` further nose down, if asked), run the
-    pipeline, compare with the truth."""
-    image, truth = draw_scene(renderer, seed, index, obstacle_share, width, height, hfov_deg,
-                              mirrored, eye_level, pitch_deg)
+    """Draw scene ``index`` of ``seed`` as ``view`` sees it, run the pipeline (given the
+    focal length with ``assume_focal``, the lens too with ``assume_lens``), compare with
+    the truth."""
+    image, truth = draw_scene(renderer, seed, index, obstacle_share, view)
+    width, height = view.width, view.height
     cfg = config or Config()
     lens = assume_lens and bool(truth.distortion)
     if assume_focal or assume_lens:
@@ -350,7 +355,7 @@ def evaluate_scene(
         latency_ms=est.latency_ms,
         range_est_m=est.range_m,
         range_true_m=range_true,
-        mirrored=mirrored,
+        mirrored=view.mirrored,
         kind=None if target is None else target.kind,
         focal_est_px=est.focal_px,
         focal_true_px=truth.focal_px,
@@ -367,25 +372,20 @@ def run_eval(
     seed: int = 0,
     config: Config | None = None,
     obstacle_share: float = 0.7,
-    width: int = 640,
-    height: int = 480,
+    view: View = View(),
     assume_focal: bool = True,
     workers: int | None = None,
     progress=None,
     renderer: str = "scene",
-    hfov_deg: float | None = None,
     assume_lens: bool = False,
     mirrored: bool = False,
-    eye_level: bool = False,
-    pitch_deg: float = 0.0,
 ) -> EvalReport:
-    """Evaluate ``scenes`` seeded scenes; ``progress(done, total)`` is called as they finish.
-    With ``mirrored``, each scene is also evaluated mirrored left to right, and the report
-    pools both: twice the results, for telling a rule change from chance on dev. With
-    ``eye_level`` each room is seen from its rotated obstacle's height, with ``pitch_deg``
-    by the camera pitched that much further nose down."""
-    jobs = [(seed, i, config, obstacle_share, width, height, assume_focal, renderer, hfov_deg,
-             assume_lens, flip, eye_level, pitch_deg)
+    """Evaluate ``scenes`` seeded scenes as ``view`` sees them; ``progress(done, total)``
+    is called as they finish. With ``mirrored``, each scene is also evaluated mirrored
+    left to right, and the report pools both: twice the results, for telling a rule change
+    from chance on dev."""
+    jobs = [(seed, i, config, obstacle_share, replace(view, mirrored=flip), assume_focal,
+             renderer, assume_lens)
             for i in range(scenes) for flip in orientations(mirrored)]
     total = len(jobs)
     workers = workers or min(len(os.sched_getaffinity(0)), 4)
@@ -459,11 +459,10 @@ def run_split(renderer: str, split: str, config: Config | None = None,
         def step(done, _n, k=k):
             if progress:
                 progress(k * per_camera + done, total)
-        out[label] = run_eval(scenes, seed, config, width=w, height=h,
-                              assume_focal=focal_given,
-                              workers=workers, progress=step, renderer=renderer, hfov_deg=fov,
-                              assume_lens=lens_given, mirrored=mirrored, eye_level=eye_level,
-                              pitch_deg=pitch_deg)
+        view = View(w, h, fov, eye_level=eye_level, pitch_deg=pitch_deg)
+        out[label] = run_eval(scenes, seed, config, view=view, assume_focal=focal_given,
+                              workers=workers, progress=step, renderer=renderer,
+                              assume_lens=lens_given, mirrored=mirrored)
     return out
 
 

@@ -8,7 +8,7 @@ import pytest
 from companion.config import Config
 from companion.vision.geometry import direction_of, principal_point
 from companion.vision.pipeline import STAGES, Pipeline
-from sitl.evaluate import EvalReport, SceneResult, draw_scene, evaluate_scene
+from sitl.evaluate import EvalReport, SceneResult, View, draw_scene, evaluate_scene
 from sitl.sample import sample_scene
 from sitl.scene import Box, Camera, Scene, mirror, render, render_image, yaw_sweep
 
@@ -179,7 +179,7 @@ def test_a_mirrored_frame_has_the_truth_of_the_room_reflected():
 def test_evaluating_a_mirrored_frame_scores_it_against_the_mirrored_truth():
     # Room 6 of seed 0 holds a box about 21° off: found both ways, η of opposite signs.
     plain = evaluate_scene(0, 6)
-    flipped = evaluate_scene(0, 6, mirrored=True)
+    flipped = evaluate_scene(0, 6, view=View(mirrored=True))
     assert flipped.mirrored and not plain.mirrored and plain.detectable and flipped.detectable
     assert flipped.eta_true_deg == pytest.approx(-plain.eta_true_deg) and plain.eta_true_deg < -10
     for r in (plain, flipped):
@@ -195,9 +195,10 @@ def test_a_pitched_view_is_the_same_room_seen_nose_down_and_its_box_is_found():
                          principal_point(truth.width, truth.height))
         return np.degrees(np.arccos(abs(d[2]) / np.linalg.norm(d)))
 
-    level, pitched = draw_scene("scene", 0, 82)[1], draw_scene("scene", 0, 82, pitch_deg=20.0)[1]
+    level = draw_scene("scene", 0, 82)[1]
+    pitched = draw_scene("scene", 0, 82, view=View(pitch_deg=20.0))[1]
     assert off_axis_deg(level) - off_axis_deg(pitched) == pytest.approx(20.0, abs=1.0)
-    r = evaluate_scene(0, 82, pitch_deg=20.0, assume_focal=False)
+    r = evaluate_scene(0, 82, view=View(pitch_deg=20.0), assume_focal=False)
     assert r.detectable and r.eta_true_deg < -20.0
     assert r.eta_est_deg == pytest.approx(r.eta_true_deg, abs=1.0)
 
