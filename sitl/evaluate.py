@@ -383,7 +383,7 @@ def run_eval(
     """Evaluate ``scenes`` seeded scenes as ``view`` sees them; ``progress(done, total)``
     is called as they finish. With ``mirrored``, each scene is also evaluated mirrored
     left to right, and the report pools both: twice the results, for telling a rule change
-    from chance on dev."""
+    from chance on dev. ``mirrored``, not ``view.mirrored``, decides the orientations."""
     jobs = [(seed, i, config, obstacle_share, replace(view, mirrored=flip), assume_focal,
              renderer, assume_lens)
             for i in range(scenes) for flip in orientations(mirrored)]
