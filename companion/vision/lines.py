@@ -109,7 +109,10 @@ def filter_segments(segments: np.ndarray, min_length_px: float, max_count: int) 
     """
     s = np.asarray(segments, dtype=float).reshape(-1, 4)
     lengths = segment_lengths(s)
-    keep = np.flatnonzero(lengths >= min_length_px)
+    long_enough = lengths >= min_length_px
+    if len(s) <= max_count and long_enough.all():  # the detector's own minimum held
+        return s
+    keep = np.flatnonzero(long_enough)
     if len(keep) > max_count:
         keep = keep[np.argsort(-lengths[keep], kind="stable")[:max_count]]
         keep.sort()

@@ -273,7 +273,7 @@ class Pipeline:
     def __init__(self, config: Config | None = None):
         self.config = config or Config()
         check_lens(self.config.camera)  # a Config built in code skips from_mapping's check
-        self._detectors: dict[float, object] = {}
+        self._detectors: dict[tuple[int, int], tuple[object, float]] = {}
         self.running_focal = RunningFocal()
         self.track: Track | None = None
         self._vision: dict[tuple[int, int], VisionConfig] = {}
@@ -290,13 +290,12 @@ class Pipeline:
         """The configured line detector for frames of ``width``×``height`` (built once per
         frame size) and its minimum segment length in pixels (``min_segment_frac`` of the
         diagonal)."""
-        min_len = self.config.vision.min_segment_frac * float(np.hypot(width, height))
-        key = round(min_len, 1)
-        if key not in self._detectors:
-            self._detectors[key] = make_detector(self.config.vision.detector, min_len,
-                                                 self.config.vision.edge_threshold,
-                                                 self.config.vision.validate_segments)
-        return self._detectors[key], min_len
+        if (width, height) not in self._detectors:
+            min_len = self.config.vision.min_segment_frac * math.hypot(width, height)
+            self._detectors[width, height] = make_detector(
+                self.config.vision.detector, min_len, self.config.vision.edge_threshold,
+                self.config.vision.validate_segments), min_len
+        return self._detectors[width, height]
 
     def _layout(self, segments: np.ndarray, w: int, h: int) -> tuple[LayoutVPs, str]:
         """Layout VPs, and where the focal length they rest on came from.

@@ -21,8 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.vision.geometry import direction_of
-
 __all__ = ["FloorContact", "floor_point", "floor_points", "floor_contacts", "obstacle_contact",
            "down_direction", "path_distance"]
 
@@ -52,9 +50,17 @@ class FloorContact:
 
 def down_direction(v3: np.ndarray, focal_px: float, centre: np.ndarray) -> np.ndarray:
     """Unit vector of the world's down direction in camera coordinates (x right, y down,
-    z forward), from the vertical VP ``v3`` (homogeneous pixels)."""
-    d = direction_of(np.asarray(v3, dtype=float), focal_px, centre).reshape(3)
-    return d if d[1] >= 0 else -d  # the camera is upright: down is down in the image
+    z forward), from the vertical VP ``v3`` (homogeneous pixels); zero for a degenerate
+    ``v3``. Scalar arithmetic (:func:`~companion.vision.geometry.direction_of` of one
+    point): it runs for every obstacle of every frame in flight."""
+    x, y, w = (float(t) for t in np.asarray(v3, dtype=float).reshape(3))
+    dx, dy, dz = x - float(centre[0]) * w, y - float(centre[1]) * w, focal_px * w
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if n == 0.0:
+        return np.zeros(3)
+    if dy < 0:  # the camera is upright: down is down in the image
+        n = -n
+    return np.array([dx / n, dy / n, dz / n])
 
 
 def floor_point(pixel, down: np.ndarray, focal_px: float, centre: np.ndarray,
@@ -103,27 +109,39 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
                    centre: np.ndarray, camera_height_m: float) -> list[FloorContact]:
     """Every floor contact of an obstacle whose corner projections are ``corners_px``
     (K×2): the lower corner of each pair of its corners on one line through V3, seen on
-    the floor, sorted by bearing. Empty when no two corners share a vertical edge."""
-    pts = np.atleast_2d(np.asarray(corners_px, dtype=float)).reshape(-1, 2)
+    the floor, sorted by bearing. Empty when no two corners share a vertical edge.
+
+    Scalar arithmetic over the K² pairs: K is a handful of corners, and the service
+    ranges every obstacle of every frame."""
+    pts = np.asarray(corners_px, dtype=float).reshape(-1, 2).tolist()
     if len(pts) < 2:
         return []
     down = down_direction(v3, focal_px, centre)
-    v = np.asarray(v3, dtype=float)
+    dx, dy, dz = (float(t) for t in down)
+    vx, vy, vw = (float(t) for t in np.asarray(v3, dtype=float).reshape(3))
+    cx, cy = float(centre[0]), float(centre[1])
     tol = math.sin(math.radians(VERTICAL_EDGE_TOL_DEG))
-    # All pairs at once (the service ranges every frame): edge[i, j] = pts[i] − pts[j],
-    # and to_v3[j] points from corner j toward V3 (which may be at infinity).
-    edge = pts[:, None, :] - pts[None, :, :]
-    n = np.hypot(edge[..., 0], edge[..., 1])
-    to_v3 = v[:2] - v[2] * pts
-    m = np.hypot(to_v3[:, 0], to_v3[:, 1])
-    cross = np.abs(edge[..., 0] * to_v3[:, 1] - edge[..., 1] * to_v3[:, 0])
-    on_one_vertical = (n >= 1.0) & (m >= 1e-12) & (cross <= tol * n * m)
-    u = (pts - centre[:2]) / focal_px  # each corner's ray (u, 1): sine of its depression
-    depression = (u @ down[:2] + down[2]) / np.sqrt(1.0 + (u * u).sum(axis=1))
-    # i lies farther down than a corner j on its vertical line: the foot of their edge.
-    lower = np.flatnonzero((on_one_vertical & (depression[:, None] > depression[None, :]))
-                           .any(axis=1))
-    out = floor_points(pts[lower], down, focal_px, centre, camera_height_m)
+    # to_v3 of corner j points from it toward V3 (which may be at infinity); depression:
+    # the sine of the angle its ray (u, 1) makes below the horizon.
+    to_v3 = [(vx - vw * x, vy - vw * y) for x, y in pts]
+    depression = []
+    for x, y in pts:
+        ux, uy = (x - cx) / focal_px, (y - cy) / focal_px
+        depression.append((ux * dx + uy * dy + dz) / math.sqrt(1.0 + ux * ux + uy * uy))
+    lower = []
+    for i, (xi, yi) in enumerate(pts):
+        # i lies farther down than a corner j on its vertical line: the foot of their edge.
+        for j, (xj, yj) in enumerate(pts):
+            ex, ey = xi - xj, yi - yj
+            n = math.hypot(ex, ey)
+            tx, ty = to_v3[j]
+            m = math.hypot(tx, ty)
+            if (n >= 1.0 and m >= 1e-12 and abs(ex * ty - ey * tx) <= tol * n * m
+                    and depression[i] > depression[j]):
+                lower.append(pts[i])
+                break
+    out = floor_points(np.array(lower).reshape(-1, 2), down, focal_px, centre,
+                       camera_height_m)
     return sorted((c for c in out if c is not None), key=lambda c: c.bearing_deg)
 
 
