@@ -3,10 +3,10 @@
 
 import numpy as np
 
-from libc.math cimport fabs, hypot, sqrt
+from libc.math cimport fabs, sqrt
 from libc.stdlib cimport free, malloc, qsort, realloc
 
-from companion.vision._geometry cimport end_distance, segment_line
+from companion.vision._geometry cimport end_distance, hypot, segment_line
 
 cdef double INF = float("inf")
 

@@ -4,7 +4,9 @@ functions describe the rules."""
 
 import numpy as np
 
-from libc.math cimport ceil, floor, hypot, rint, sqrt
+from libc.math cimport ceil, floor, rint, sqrt
+
+from companion.vision._geometry cimport hypot
 
 # Where the grey-level step across a segment is sampled inside it (fractions of its length).
 cdef double[::1] INSIDE = np.linspace(0.1, 0.9, 9)

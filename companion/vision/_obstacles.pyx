@@ -4,7 +4,7 @@ the steps described there."""
 
 import numpy as np
 
-from libc.math cimport fabs, hypot, sin
+from libc.math cimport fabs, sin
 from libc.stdlib cimport free, malloc, realloc
 
 from companion.vision._geometry cimport (
@@ -13,6 +13,7 @@ from companion.vision._geometry cimport (
     dot3,
     end_distance,
     endpoint_weight,
+    hypot,
     pixel_point,
     radians,
     segment_line,

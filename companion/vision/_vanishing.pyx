@@ -8,7 +8,7 @@ a 3-D direction and angles between VPs are angles in space.
 
 import numpy as np
 
-from libc.math cimport asin, atan2, ceil, cos, exp, fmod, hypot, sin, sqrt
+from libc.math cimport asin, atan2, ceil, cos, exp, fmod, sin, sqrt
 
 from companion.vision._geometry cimport (
     angle_between_deg,
@@ -16,6 +16,7 @@ from companion.vision._geometry cimport (
     degrees,
     dot3,
     endpoint_weight,
+    hypot,
     norm3,
     pixel_point,
     radians,
