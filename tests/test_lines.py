@@ -109,6 +109,28 @@ def test_the_step_test_keeps_the_edge_and_drops_chance_segments():
     assert np.count_nonzero(chance >= Config().vision.min_step_z) <= 0.1 * len(chance)
 
 
+def test_the_noise_estimate_and_the_step_test_do_not_depend_on_handedness():
+    # A mirrored frame is the same scene: the same σ, and the same z for each segment
+    # mirrored with it. Every other column counted from the left is the even columns of
+    # one and the odd ones of the other; and the median of an even number of stations,
+    # whose differences the mirror negates, must not pick a different one of the two.
+    rng = np.random.default_rng(4)
+    texture = cv2.GaussianBlur(rng.normal(0.0, 25.0, (240, 320)), (0, 0), 1.5)
+    frame = np.clip(110.0 + texture + rng.normal(0.0, 3.0, (240, 320)), 0, 255).astype(np.uint8)
+    frame[:, 170:] = np.clip(frame[:, 170:].astype(int) + 40, 0, 255).astype(np.uint8)
+    mirrored = np.ascontiguousarray(frame[:, ::-1])
+    assert noise_sigma(mirrored) == noise_sigma(frame)
+    segments = np.column_stack([rng.uniform(0, 319, 60), rng.uniform(0, 239, 60),
+                                rng.uniform(0, 319, 60), rng.uniform(0, 239, 60)])
+    segments = np.vstack([segments, [[169.5, 20.0, 169.5, 27.5], [169.5, 30.0, 169.5, 200.0]]])
+    flipped = segments.copy()
+    flipped[:, [0, 2]] = 319.0 - segments[:, [0, 2]]
+    sigma = noise_sigma(frame)
+    z = edge_step_z(frame, segments, sigma)
+    assert edge_step_z(mirrored, flipped, sigma) == pytest.approx(z, abs=1e-9)
+    assert z[-1] > 30.0  # the step itself
+
+
 def test_only_unassigned_segments_are_put_to_the_step_test():
     frame = _rectangle(noise=3.0)
     segments = np.array([[90.0, 59.5, 230.0, 59.5],     # the rectangle's top edge
