@@ -191,7 +191,8 @@ def noise_sigma(gray: np.ndarray, positions: int = 10_000) -> float:
     mean absolute response to a mask that cancels every grey level varying linearly, so
     that on a plain surface only the noise answers. The mask's taps are 2 px apart, so a
     slight blur (demosaicing, a lens) does not correlate them, and it is read at about
-    ``positions`` places (every other column of evenly spaced rows): enough for one
+    ``positions`` places (every other column of evenly spaced rows, counted from each
+    border towards the middle, so that a mirrored frame gives the same σ): enough for one
     number to a few per cent, at the same cost at any frame size. Texture and edges
     answer too, so on a textured frame the estimate errs high (the test it serves then
     errs towards keeping segments).
@@ -211,8 +212,10 @@ def edge_step_z(gray: np.ndarray, segments: np.ndarray, sigma: float,
     At stations every ``step_px`` along the segment (2 to 64 of them) the mean grey level
     1 and 2 px to one side minus that to the other is read (bilinear); on a surface with
     no edge each such difference is noise of standard deviation about ``sigma``, and the
-    median of ``m`` of them has a standard error of ``1.2533 sigma / sqrt(m)``. The
-    result is the median's size in those units: a long faint edge and a short strong one
+    median of ``m`` of them (the mean of the middle two when ``m`` is even, so that the
+    segment's direction does not matter) has a standard error of
+    ``1.2533 sigma / sqrt(m)``. The result is the median's size in those units: a long
+    faint edge and a short strong one
     both score high, a chain of noise pixels that a detector fitted a line to does not.
 
     Inputs: ``gray`` H×W uint8, ``segments`` N×4 pixels, ``sigma`` grey levels (from
