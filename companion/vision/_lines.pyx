@@ -379,7 +379,8 @@ def step_z(gray, segments, double sigma, double step_px):
         med = select_kth(diff, m, m // 2)
         if m % 2 == 0:  # the mean of the middle two: the upper one alone would change
             # with the segment's direction (a mirrored frame's segment sees the
-            # differences negated, and its upper middle is the original's lower one)
+            # differences negated, and its upper middle is the original's lower one);
+            # select_kth left the m // 2 smaller ones in front: the lower is their largest
             lower = diff[0]
             for k in range(1, m // 2):
                 lower = diff[k] if diff[k] > lower else lower

@@ -121,11 +121,12 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
     vx, vy, vw = (float(t) for t in np.asarray(v3, dtype=float).reshape(3))
     cx, cy = float(centre[0]), float(centre[1])
     tol = math.sin(math.radians(VERTICAL_EDGE_TOL_DEG))
-    # to_v3 of corner j points from it toward V3 (which may be at infinity); depression:
-    # the sine of the angle its ray (u, 1) makes below the horizon.
-    to_v3 = [(vx - vw * x, vy - vw * y) for x, y in pts]
-    depression = []
+    # to_v3 of corner j points from it toward V3 (which may be at infinity), with its
+    # length; depression: the sine of the angle its ray (u, 1) makes below the horizon.
+    to_v3, depression = [], []
     for x, y in pts:
+        tx, ty = vx - vw * x, vy - vw * y
+        to_v3.append((tx, ty, math.hypot(tx, ty)))
         ux, uy = (x - cx) / focal_px, (y - cy) / focal_px
         depression.append((ux * dx + uy * dy + dz) / math.sqrt(1.0 + ux * ux + uy * uy))
     lower = []
@@ -134,8 +135,7 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
         for j, (xj, yj) in enumerate(pts):
             ex, ey = xi - xj, yi - yj
             n = math.hypot(ex, ey)
-            tx, ty = to_v3[j]
-            m = math.hypot(tx, ty)
+            tx, ty, m = to_v3[j]
             if (n >= 1.0 and m >= 1e-12 and abs(ex * ty - ey * tx) <= tol * n * m
                     and depression[i] > depression[j]):
                 lower.append(pts[i])
