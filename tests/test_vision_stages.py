@@ -893,6 +893,30 @@ def test_a_rug_corner_below_a_posts_foot_on_the_rooms_floor_line_is_no_box(mirro
 
 
 @pytest.mark.parametrize("mirrored", [False, True])
+def test_a_tables_top_corner_whose_leg_starts_below_the_apron_is_still_found(mirrored):
+    # The same picture upside down: a table's top corner seen from above, its leg hanging
+    # from under the apron, 12 px below the corner, and the room's floor line seen under
+    # the top, leaving the leg's head. The room shows between an open table's legs; the
+    # rule above is about an edge's foot, and a corner below it.
+    from companion.vision.obstacles import find_obstacles
+
+    s, u, w, v = _rug_corner_sides(mirrored)
+    corner = np.array([0.2 * s, 0.45, 4.0])  # 0.75 m high; the camera 1.2 m above the floor
+    head = corner + [0.0, 0.15, 0.0]
+    corner_px, end_u, end_v, head_px, foot_px = _project(
+        [corner, corner + 0.8 * u, corner + 0.8 * v, head, corner + [0.0, 0.75, 0.0]])
+    assert 10.0 < np.hypot(*(head_px - corner_px)) < 20.0
+    table = np.array([[*head_px, *foot_px], [*corner_px, *end_u], [*corner_px, *end_v]])
+    floor_line = np.array([[*head_px, *(head_px + [-s * 80.0, 0.0])]])
+    labels = np.array([V3, NONE, NONE])
+    segs = np.vstack([table, floor_line])
+    corners = find_corners(segs, np.append(labels, V1))
+    assert len(corners) >= 1
+    assert len(find_obstacles(segs, corners, _room_layout(), np.append(labels == NONE, False),
+                              np.append(labels, V1))) == 1
+
+
+@pytest.mark.parametrize("mirrored", [False, True])
 def test_a_rug_corner_with_both_sides_on_one_side_is_no_hidden_edge_corner(mirrored):
     # The same rug, its corner on the open floor, one side running on to a pole at its far
     # end: the junction would be a box's near corner whose faces are lit alike, but the

@@ -760,14 +760,18 @@ cdef bint room_edge_at(double[:, ::1] s, double[::1] lengths, tuple chain,
     return False
 
 
-cdef bint stands_short(double[:, ::1] s, double[::1] lengths, Py_ssize_t r, double px,
-                       double py, double ex, double ey, Py_ssize_t[::1] room_idx,
+cdef bint stands_short(Frame* fr, double[:, ::1] s, double[::1] lengths, Py_ssize_t r,
+                       double px, double py, double ex, double ey, Py_ssize_t[::1] room_idx,
                        const double* o1, const double* o2, Params* p):
-    """Whether the vertical leg ``r`` of the corner at (px, py), whose edge runs to
-    (ex, ey), ends more than ``radius_px`` short of the corner, at a point
-    a room edge leaves (:func:`room_edge_at`): the edge's own foot or head is there, on a
-    room line, and the corner is something else's. At the corner itself the room edges a
-    box hides end too, so only an end apart from it can tell."""
+    """Whether the corner at (px, py) lies below its vertical edge, which rises to
+    (ex, ey), and the edge's leg ``r`` ends more than ``radius_px`` above the corner, at a
+    point a room edge leaves (:func:`room_edge_at`): the edge's own foot is there, on the
+    room's floor line, and the corner below is something else's. At the corner itself the
+    room edges a box hides end too, so only an end apart from it can tell. A corner at the
+    top of its edge is not tested: under a table's top the room shows between the legs,
+    and its edges leave a leg's head."""
+    if below_horizon(fr, ex, ey) >= below_horizon(fr, px, py):
+        return False
     cdef double qx = s[r, 0], qy = s[r, 1]
     if (s[r, 2] - px) ** 2 + (s[r, 3] - py) ** 2 < (qx - px) ** 2 + (qy - py) ** 2:
         qx, qy = s[r, 2], s[r, 3]
@@ -1415,7 +1419,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                             continue
                     # An edge that stops short of C_g and stands on a room edge there is
                     # a door post's or an aligned box's; C_g below it, a rug's corner.
-                    if stands_short(s, lengths, cr[g], pc[g, 0], pc[g, 1], far[g, 0],
+                    if stands_short(&fr, s, lengths, cr[g], pc[g, 0], pc[g, 1], far[g, 0],
                                     far[g, 1], room_idx, o1, o2, &p):
                         continue
                 h = new_hypothesis(&found)

@@ -111,9 +111,10 @@ def find_obstacles(
     At least one OVP must come from two real edges (``L^g × L^h``), and λ3 (eq. 8) holds.
     With no leg of ``C_h`` at all, both OVPs are where ``C_g``'s legs cross the horizon,
     unless a room edge leaves the vertical edge's far end inside the frame (a door frame or
-    an aligned box, with a rug's or a shadow's corner at its foot), or its near end where
-    that stops more than ``radius_px`` short of ``C_g`` (the edge stands on a room line
-    there, not on ``C_g``). A ``C_g`` at the
+    an aligned box, with a rug's or a shadow's corner at its foot), or, with ``C_g`` at
+    the edge's foot, its near end where that stops more than ``radius_px`` above ``C_g``
+    (the edge stands on the room's floor line there, not on ``C_g``; under a table's top
+    the room shows between the legs, so a top corner is not tested). A ``C_g`` at the
     edge's foot must have its legs on either side of the edge, as the bottom edges of a
     convex box's two faces in sight are; two on one side are a rug's or a shadow's.
     When no pair is found this way, boxes that show fewer corners are looked for: leg
