@@ -121,6 +121,13 @@ cdef inline double below_horizon(Frame* fr, double x, double y) noexcept nogil:
     return d if fr.horizon[1] > 0 else -d
 
 
+cdef inline bint at_top(Frame* fr, double x, double y, double fx, double fy) noexcept nogil:
+    """Whether a corner at (x, y) whose vertical edge runs to (fx, fy) is at the edge's top:
+    the far end lies at least as far below the horizon (on a vertical line, the lower
+    point in the world is the farther below it)."""
+    return below_horizon(fr, fx, fy) >= below_horizon(fr, x, y)
+
+
 cdef inline double horizon_error(Frame* fr, const double* d) noexcept nogil:
     """How far a direction is from horizontal (⟂ V3), degrees."""
     return fabs(90.0 - angle_between_deg(d, fr.d3))
@@ -770,7 +777,7 @@ cdef bint stands_short(Frame* fr, double[:, ::1] s, double[::1] lengths, Py_ssiz
     room edges a box hides end too, so only an end apart from it can tell. A corner at the
     top of its edge is not tested: under a table's top the room shows between the legs,
     and its edges leave a leg's head."""
-    if below_horizon(fr, ex, ey) >= below_horizon(fr, px, py):
+    if at_top(fr, px, py, ex, ey):
         return False
     cdef double qx = s[r, 0], qy = s[r, 1]
     if (s[r, 2] - px) ** 2 + (s[r, 3] - py) ** 2 < (qx - px) ** 2 + (qy - py) ** 2:
@@ -896,7 +903,7 @@ cdef inline bint foot_legs_apart(Frame* fr, double[:, ::1] s, double x, double y
     side, so only the foot is tested. A leg along the edge itself (sine 0) counts with
     those of negative sine (:func:`_split` at any angle off the edge)."""
     cdef Py_ssize_t by_side[2]
-    if below_horizon(fr, fx, fy) >= below_horizon(fr, x, y):
+    if at_top(fr, x, y, fx, fy):
         return True
     return _split(s, a, b, x, y, fx - x, fy - y, 0.0, by_side)
 
