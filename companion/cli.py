@@ -82,6 +82,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     ev.add_argument("--json", metavar="PATH", help="also write the figures as JSON")
+    ev.add_argument("--frames", metavar="PATH",
+                    help="with --scenes or --renderer (not --clips): also write one JSON line "
+                         "per frame, to compare two runs with --diff")
+    ev.add_argument("--diff", nargs=2, metavar=("OLD", "NEW"),
+                    help="instead: the frames whose outcome differs between two --frames "
+                         "files (detections gained and lost, false alarms, η errors moved)")
     ev.add_argument("--yud", metavar="DIR",
                     help="instead: layout-VP accuracy on the York Urban Database in DIR")
     ev.add_argument("--renderer", choices=("scene", "pathtraced", "all"),
@@ -266,6 +272,10 @@ def run_eval(args) -> int:
         raise UserError("--pitch goes with --renderer NAME (not --clips)")
     if not -30.0 <= args.pitch <= 30.0:
         raise UserError(f"--pitch {args.pitch:g}: give -30 to 30 degrees")
+    if args.diff:
+        return run_eval_diff(args)
+    if args.frames and (args.yud or args.clips):
+        raise UserError("--frames goes with --scenes or --renderer NAME (not --clips, --yud)")
     if args.yud:
         args.split = {"dev": "train", None: "test"}.get(args.split, args.split)
         return run_eval_yud(args)
@@ -304,6 +314,41 @@ def run_eval(args) -> int:
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(report.figures(), f, indent=2)
+    if args.frames:
+        from sitl.frames import frame_rows
+
+        _write_frames(args.frames, frame_rows(report.results, "scene", None, args.seed,
+                                              f"{args.width}×{args.height}"))
+    return 0
+
+
+def _write_frames(path: str, rows: list[dict]) -> None:
+    with _open_output(path, "frames") as f:
+        for row in rows:
+            f.write(json.dumps(row, ensure_ascii=False) + "\n")
+    print(f"{len(rows)} frames written to {path}")
+
+
+def run_eval_diff(args) -> int:
+    """``companion eval --diff OLD NEW``: the frames whose outcome changed."""
+    from sitl.frames import format_changes, frame_changes, read_frames
+
+    if args.renderer or args.yud or args.frames:
+        raise UserError("--diff compares two --frames files; it runs nothing itself")
+    runs = []
+    for path in args.diff:
+        try:
+            runs.append(read_frames(path))
+        except FileNotFoundError:
+            raise UserError(f"frames file not found: {path}") from None
+        except (OSError, UnicodeDecodeError, ValueError) as e:
+            raise UserError(f"cannot read frames file {path}: {e}") from None
+    changes, shared = frame_changes(*runs)
+    if not shared:
+        raise UserError(f"{args.diff[0]} and {args.diff[1]} share no frame (another split, "
+                        "seed or camera?)")
+    for line in format_changes(changes, shared):
+        print(line)
     return 0
 
 
@@ -329,7 +374,10 @@ def run_eval_splits(args) -> int:
             raise UserError("--clips estimates the focal length as a video does; "
                             "--focal-given and --lens-given are for the splits")
         return _eval_clips(args, renderers, splits, cfg, start)
+    from sitl.frames import frame_rows
+
     figures = {}
+    rows: list[dict] = []
     for renderer in renderers:
         reports = {}
         for s in splits:
@@ -348,6 +396,8 @@ def run_eval_splits(args) -> int:
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
+        rows += [row for s, by_cam in reports.items() for cam, rep in by_cam.items()
+                 for row in frame_rows(rep.results, renderer, s, SPLITS[(renderer, s)][0], cam)]
     took = time.perf_counter() - start
     print(f"({took:.0f} s; companion eval --renderer {args.renderer}"
           + (f" --split {split}" if split != "all" else "")
@@ -359,6 +409,8 @@ def run_eval_splits(args) -> int:
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)
+    if args.frames:
+        _write_frames(args.frames, rows)
     return 0
 
 

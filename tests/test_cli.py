@@ -259,6 +259,38 @@ def test_eval_prints_figures(tmp_path):
     assert fig["detectable"] + fig["manhattan_only"] + fig["not_detectable"] == 3
 
 
+def test_eval_writes_frames_and_diff_lists_the_frames_that_changed(tmp_path):
+    old = tmp_path / "old.jsonl"
+    r = run("eval", "--scenes", "4", "--workers", "1", "--frames", old, timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = read_log(old)
+    assert [row["index"] for row in rows] == [0, 1, 2, 3]
+    assert {row["camera"] for row in rows} == {"640×480"}
+    same = run("eval", "--diff", old, old)
+    assert same.returncode == 0, same.stderr
+    assert same.stdout.splitlines() == [
+        "4 frames in both runs; 0 changed (an η error that moved by more than 1° counts)"]
+    # One Manhattan-only frame given an η it did not have: a false alarm, named.
+    k = next(i for i, row in enumerate(rows) if not row["has_obstacle"])
+    rows[k]["eta_est_deg"] = 12.5 if rows[k]["eta_est_deg"] is None else None
+    what = "false alarm" if rows[k]["eta_est_deg"] is not None else "false alarm gone"
+    new = tmp_path / "new.jsonl"
+    new.write_text("".join(json.dumps(row) + "\n" for row in rows))
+    d = run("eval", "--diff", old, new)
+    assert d.returncode == 0, d.stderr
+    lines = d.stdout.splitlines()
+    assert lines[0].startswith("4 frames in both runs; 1 changed")
+    assert lines[1] == f"640×480, scene seed 0: 1 {what}"
+    assert lines[2].split()[0] == str(rows[k]["index"]) and what in lines[2]
+    _assert_one_line_error(run("eval", "--diff", old, tmp_path / "none.jsonl"),
+                           "frames file not found")
+    (tmp_path / "fig.json").write_text('{"scenes": 4}\n')
+    _assert_one_line_error(run("eval", "--diff", old, tmp_path / "fig.json"),
+                           "not a frame row")
+    _assert_one_line_error(run("eval", "--renderer", "scene", "--clips", "--frames", new),
+                           "--frames goes with --scenes or --renderer")
+
+
 def test_bench_prints_ratios_and_writes_the_json_keys(tmp_path):
     out = tmp_path / "bench.json"
     r = run("bench", "--frames", "2", "--repeat", "1", "--resolutions", "320x240", "640x480",

@@ -1,0 +1,155 @@
+"""Per-frame evaluation results, written as JSON lines and compared between two runs.
+
+A rule change is decided on a dev split by what it does frame by frame: which detections
+it gains and loses, which false alarms it adds or removes, whose η error it moves. The
+pooled rows of ``companion eval`` hide that (a gained and a lost detection cancel), so
+``companion eval --renderer R --split dev --frames OLD.jsonl`` on one commit and
+``--frames NEW.jsonl`` on another, then ``companion eval --diff OLD.jsonl NEW.jsonl``,
+list the frames that changed.
+
+Each line is one frame: where it came from (``renderer``, ``split``, ``seed``,
+``camera``) and every field of :class:`~sitl.evaluate.SceneResult`. A frame is identified
+by ``renderer``, ``split``, ``seed``, ``camera``, ``index`` and ``mirrored``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+__all__ = ["FrameChange", "frame_rows", "read_frames", "frame_changes", "format_changes"]
+
+KEY_FIELDS = ("renderer", "split", "seed", "camera", "index", "mirrored")
+"""the fields that identify a frame across runs"""
+
+
+def frame_rows(results: Iterable, renderer: str, split: str | None, seed: int,
+               camera: str) -> list[dict]:
+    """One dict per :class:`~sitl.evaluate.SceneResult` of a run, with where it came from:
+    ``renderer``, ``split`` (None outside the frozen splits), ``seed``, ``camera`` (a
+    label of :data:`~sitl.evaluate.CAMERAS` or ``W×H``)."""
+    return [{"renderer": renderer, "split": split, "seed": seed, "camera": camera,
+             **asdict(r)} for r in results]
+
+
+def read_frames(path: str | Path) -> list[dict]:
+    """The rows of a ``--frames`` file. Raises ValueError, naming the line, on one that
+    is not a frame row."""
+    rows = []
+    with open(path, encoding="utf-8") as f:
+        for n, line in enumerate(f, 1):
+            if not line.strip():
+                continue
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                raise ValueError(f"{path}:{n}: not JSON") from None
+            if not isinstance(row, dict) or any(k not in row for k in KEY_FIELDS):
+                raise ValueError(f"{path}:{n}: not a frame row (companion eval --frames)")
+            rows.append(row)
+    return rows
+
+
+@dataclass(frozen=True)
+class FrameChange:
+    """How one frame's outcome differs between two runs.
+
+    ``what``: ``gained`` (a detectable obstacle now given an η), ``lost`` (no longer),
+    ``false alarm`` (an η on a frame with no rotated obstacle, not there before),
+    ``false alarm gone``, or ``eta`` (detected in both, the η error moved by more than the
+    tolerance). ``old_err_deg``, ``new_err_deg``: |η estimated − η true| in each run,
+    None where there is no η (or no truth).
+    """
+
+    renderer: str
+    split: str | None
+    seed: int
+    camera: str
+    index: int
+    mirrored: bool
+    what: str
+    kind: str | None
+    eta_true_deg: float | None
+    old_eta_deg: float | None
+    new_eta_deg: float | None
+
+    @property
+    def old_err_deg(self) -> float | None:
+        return _err(self.old_eta_deg, self.eta_true_deg)
+
+    @property
+    def new_err_deg(self) -> float | None:
+        return _err(self.new_eta_deg, self.eta_true_deg)
+
+
+def _err(eta: float | None, truth: float | None) -> float | None:
+    return None if eta is None or truth is None else abs(eta - truth)
+
+
+def _key(row: dict) -> tuple:
+    return tuple(row[k] for k in KEY_FIELDS)
+
+
+def frame_changes(old: list[dict], new: list[dict], eta_tol_deg: float = 1.0
+                  ) -> tuple[list[FrameChange], int]:
+    """The frames whose outcome differs between ``old`` and ``new`` rows, in ``new``'s
+    order, and how many frames the two runs share. Frames in only one run are not
+    compared. A detectable frame changes when it gains or loses its η, or when its η error
+    moves by more than ``eta_tol_deg`` degrees; a frame without a rotated obstacle, when
+    it gains or loses an η (a false alarm)."""
+    before = {_key(r): r for r in old}
+    changes = []
+    shared = 0
+    for r in new:
+        o = before.get(_key(r))
+        if o is None:
+            continue
+        shared += 1
+        was, now = o["eta_est_deg"], r["eta_est_deg"]
+        what = None
+        if r["detectable"]:
+            if (was is None) != (now is None):
+                what = "gained" if now is not None else "lost"
+            elif now is not None:
+                moved = abs(_err(now, r["eta_true_deg"]) - _err(was, o["eta_true_deg"]))
+                what = "eta" if moved > eta_tol_deg else None
+        elif not r["has_obstacle"] and (was is None) != (now is None):
+            what = "false alarm" if now is not None else "false alarm gone"
+        if what:
+            changes.append(FrameChange(r["renderer"], r["split"], r["seed"], r["camera"],
+                                       r["index"], r["mirrored"], what, r.get("kind"),
+                                       r["eta_true_deg"], was, now))
+    return changes, shared
+
+
+WHAT_ORDER = ("gained", "lost", "false alarm", "false alarm gone", "eta")
+
+
+def format_changes(changes: list[FrameChange], shared: int, eta_tol_deg: float = 1.0
+                   ) -> list[str]:
+    """Printable lines: a count per kind of change for each renderer, split and camera,
+    then one line per changed frame."""
+
+    def deg(x: float | None) -> str:
+        return "—" if x is None else f"{x:+.1f}°"
+
+    lines = [f"{shared} frames in both runs; {len(changes)} changed "
+             f"(an η error that moved by more than {eta_tol_deg:g}° counts)"]
+    groups: dict[tuple, list[FrameChange]] = {}
+    for c in changes:
+        groups.setdefault((c.renderer, c.split, c.seed, c.camera), []).append(c)
+    for (renderer, split, seed, camera), cs in groups.items():
+        counts = ", ".join(f"{sum(c.what == w for c in cs)} {w}" for w in WHAT_ORDER
+                           if any(c.what == w for c in cs))
+        where = f"{renderer} {split}" if split else f"{renderer} seed {seed}"
+        lines.append(f"{camera}, {where}: {counts}")
+        for c in sorted(cs, key=lambda c: (WHAT_ORDER.index(c.what), c.index, c.mirrored)):
+            frame = f"{c.index}{' mirrored' if c.mirrored else ''}"
+            err = ""
+            if c.what == "eta":
+                err = f"  error {c.old_err_deg:.1f}° → {c.new_err_deg:.1f}°"
+            lines.append(f"  {frame:<14} {c.what:<17} {c.kind or '':<8} true {deg(c.eta_true_deg)}"
+                         f"  η {deg(c.old_eta_deg)} → {deg(c.new_eta_deg)}{err}")
+    return lines

@@ -1,0 +1,77 @@
+"""Per-frame results and their comparison between two runs (sitl.frames)."""
+
+import json
+
+import pytest
+
+from sitl.evaluate import SceneResult
+from sitl.frames import format_changes, frame_changes, frame_rows, read_frames
+
+
+def result(index, eta_est, eta_true=30.0, detectable=True, has_obstacle=True, mirrored=False):
+    return SceneResult(index=index, has_obstacle=has_obstacle, detectable=detectable,
+                       eta_true_deg=eta_true if has_obstacle else None, eta_est_deg=eta_est,
+                       corner_err_pct=None, latency_ms=3.0, mirrored=mirrored, kind="box")
+
+
+def rows(results, camera="640×480, 90°"):
+    return frame_rows(results, "pathtraced", "dev", 11, camera)
+
+
+def test_each_kind_of_change_is_found_and_nothing_else():
+    old = rows([
+        result(0, None),                      # gained
+        result(1, 29.0),                      # lost
+        result(2, None, has_obstacle=False, detectable=False),   # a new false alarm
+        result(3, 12.0, has_obstacle=False, detectable=False),   # a false alarm gone
+        result(4, 31.0),                      # error 1° → 6°: moved
+        result(5, 31.0),                      # error 1° → 1.5°: within the tolerance
+        result(6, None, detectable=False),    # not detectable: not scored, not a change
+        result(7, 30.5, mirrored=True),       # unchanged
+    ])
+    new = rows([
+        result(0, 30.2), result(1, None),
+        result(2, -20.0, has_obstacle=False, detectable=False),
+        result(3, None, has_obstacle=False, detectable=False),
+        result(4, 36.0), result(5, 31.5), result(6, 10.0, detectable=False),
+        result(7, 30.5, mirrored=True),
+    ])
+    changes, shared = frame_changes(old, new, eta_tol_deg=1.0)
+    assert shared == 8
+    assert [(c.index, c.what) for c in changes] == [
+        (0, "gained"), (1, "lost"), (2, "false alarm"), (3, "false alarm gone"), (4, "eta")]
+    moved = changes[-1]
+    assert moved.old_err_deg == pytest.approx(1.0) and moved.new_err_deg == pytest.approx(6.0)
+
+
+def test_frames_are_matched_by_camera_index_and_mirror_not_by_position():
+    old = rows([result(0, 30.0), result(0, None, mirrored=True)])
+    new = rows([result(0, None, mirrored=True), result(0, 30.0)])
+    assert frame_changes(old, new) == ([], 2)
+    other_camera = rows([result(0, None)], camera="320×240, 90°")
+    changes, shared = frame_changes(old, other_camera)
+    assert (changes, shared) == ([], 0)
+
+
+def test_written_rows_read_back_and_format_one_line_per_change(tmp_path):
+    path = tmp_path / "f.jsonl"
+    old = rows([result(3, None), result(4, 30.0)])
+    path.write_text("".join(json.dumps(r, ensure_ascii=False) + "\n" for r in old))
+    back = read_frames(path)
+    assert back == old
+    changes, shared = frame_changes(back, rows([result(3, 31.0), result(4, 30.0)]))
+    lines = format_changes(changes, shared)
+    assert lines[0].startswith("2 frames in both runs; 1 changed")
+    assert lines[1] == "640×480, 90°, pathtraced dev: 1 gained"
+    assert lines[2].split()[:2] == ["3", "gained"]
+    assert len(lines) == 3
+
+
+def test_a_line_that_is_not_a_frame_row_is_named(tmp_path):
+    path = tmp_path / "f.jsonl"
+    path.write_text(json.dumps(rows([result(0, None)])[0]) + "\n{\"figures\": 1}\n")
+    with pytest.raises(ValueError, match=r"f\.jsonl:2: not a frame row"):
+        read_frames(path)
+    path.write_text("not json\n")
+    with pytest.raises(ValueError, match=r"f\.jsonl:1: not JSON"):
+        read_frames(path)
