@@ -291,6 +291,25 @@ def test_eval_writes_frames_and_diff_lists_the_frames_that_changed(tmp_path):
                            "--frames goes with --scenes or --renderer")
 
 
+def test_output_into_a_closed_pipe_ends_quietly(tmp_path):
+    """`companion eval --diff … | head`: the reader leaves early; no traceback."""
+    row = {"renderer": "scene", "split": None, "seed": 0, "camera": "640×480",
+           "mirrored": False, "has_obstacle": True, "detectable": True, "eta_true_deg": 30.0,
+           "kind": "box"}
+    old, new = tmp_path / "old.jsonl", tmp_path / "new.jsonl"
+    old.write_text("".join(json.dumps({**row, "index": i, "eta_est_deg": None}) + "\n"
+                           for i in range(5000)))
+    new.write_text("".join(json.dumps({**row, "index": i, "eta_est_deg": 31.0}) + "\n"
+                           for i in range(5000)))
+    p = subprocess.Popen([*EXE, "eval", "--diff", str(old), str(new)], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert p.stdout.read(20)  # 5000 lines are more than a pipe holds: it blocks, then breaks
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=60) == 141
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+
+
 def test_bench_prints_ratios_and_writes_the_json_keys(tmp_path):
     out = tmp_path / "bench.json"
     r = run("bench", "--frames", "2", "--repeat", "1", "--resolutions", "320x240", "640x480",
