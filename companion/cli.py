@@ -377,10 +377,8 @@ def run_eval_splits(args) -> int:
             raise UserError("--clips estimates the focal length as a video does; "
                             "--focal-given and --lens-given are for the splits")
         return _eval_clips(args, renderers, splits, cfg, start)
-    from sitl.frames import frame_rows
-
     figures = {}
-    rows: list[dict] = []
+    by_renderer = {}
     for renderer in renderers:
         reports = {}
         for s in splits:
@@ -399,8 +397,7 @@ def run_eval_splits(args) -> int:
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
-        rows += [row for s, by_cam in reports.items() for cam, rep in by_cam.items()
-                 for row in frame_rows(rep.results, renderer, s, SPLITS[(renderer, s)][0], cam)]
+        by_renderer[renderer] = reports
     took = time.perf_counter() - start
     print(f"({took:.0f} s; companion eval --renderer {args.renderer}"
           + (f" --split {split}" if split != "all" else "")
@@ -413,7 +410,12 @@ def run_eval_splits(args) -> int:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)
     if args.frames:
-        _write_frames(args.frames, rows)
+        from sitl.frames import frame_rows
+
+        _write_frames(args.frames, [
+            row for renderer, reports in by_renderer.items() for s, by_cam in reports.items()
+            for cam, rep in by_cam.items()
+            for row in frame_rows(rep.results, renderer, s, SPLITS[(renderer, s)][0], cam)])
     return 0
 
 
