@@ -24,6 +24,9 @@ __all__ = ["FrameChange", "frame_rows", "read_frames", "frame_changes", "format_
 KEY_FIELDS = ("renderer", "split", "seed", "camera", "index", "mirrored")
 """the fields that identify a frame across runs"""
 
+OUTCOME_FIELDS = ("has_obstacle", "detectable", "eta_true_deg", "eta_est_deg")
+"""the fields :func:`frame_changes` compares"""
+
 
 def frame_rows(results: Iterable, renderer: str, split: str | None, seed: int,
                camera: str) -> list[dict]:
@@ -46,7 +49,8 @@ def read_frames(path: str | Path) -> list[dict]:
                 row = json.loads(line)
             except json.JSONDecodeError:
                 raise ValueError(f"{path}:{n}: not JSON") from None
-            if not isinstance(row, dict) or any(k not in row for k in KEY_FIELDS):
+            if not isinstance(row, dict) or any(k not in row
+                                                for k in KEY_FIELDS + OUTCOME_FIELDS):
                 raise ValueError(f"{path}:{n}: not a frame row (companion eval --frames)")
             rows.append(row)
     return rows

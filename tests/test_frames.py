@@ -72,6 +72,11 @@ def test_a_line_that_is_not_a_frame_row_is_named(tmp_path):
     path.write_text(json.dumps(rows([result(0, None)])[0]) + "\n{\"figures\": 1}\n")
     with pytest.raises(ValueError, match=r"f\.jsonl:2: not a frame row"):
         read_frames(path)
+    row = rows([result(0, None)])[0]
+    del row["eta_est_deg"]  # the outcome it would compare is missing
+    path.write_text(json.dumps(row) + "\n")
+    with pytest.raises(ValueError, match=r"f\.jsonl:1: not a frame row"):
+        read_frames(path)
     path.write_text("not json\n")
     with pytest.raises(ValueError, match=r"f\.jsonl:1: not JSON"):
         read_frames(path)
