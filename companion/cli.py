@@ -115,6 +115,11 @@ def _parser() -> argparse.ArgumentParser:
                     help="with --renderer: each split room seen by the camera pitched DEG "
                          "further nose down (-30 to 30), as a multicopter's fixed camera "
                          "sees it while it accelerates forward")
+    ev.add_argument("--as-video", action="store_true",
+                    help="with --renderer: each camera's frames of the split run in order "
+                         "through one pipeline, as companion --video runs a recording, so "
+                         "the focal length and the lens are learnt across them (not with "
+                         "--lens-given or --clips)")
     ev.add_argument("--clips", action="store_true",
                     help="with --renderer: per-frame and tracked η on yawing clips")
     ev.add_argument("--long", action="store_true",
@@ -275,6 +280,9 @@ def run_eval(args) -> int:
         raise UserError("--pitch goes with --renderer NAME (not --clips)")
     if not -30.0 <= args.pitch <= 30.0:
         raise UserError(f"--pitch {args.pitch:g}: give -30 to 30 degrees")
+    if args.as_video and (args.clips or args.lens_given or not args.renderer):
+        raise UserError("--as-video goes with --renderer NAME (not --clips, which are videos "
+                        "already, nor --lens-given: the split's rooms each have their own lens)")
     if args.diff:
         return run_eval_diff(args)
     if args.frames and (args.yud or args.clips):
@@ -389,11 +397,12 @@ def run_eval_splits(args) -> int:
                                        lambda d, t, p=progress, r=renderer, s=s: p.update(
                                            d, t, f"{r} {s}"), focal_given=args.focal_given,
                                        lens_given=args.lens_given, mirrored=args.mirrored,
-                                       eye_level=args.eye_level, pitch_deg=args.pitch)
+                                       eye_level=args.eye_level, pitch_deg=args.pitch,
+                                       as_video=args.as_video)
             finally:
                 progress.close()
         for line in format_splits(renderer, reports, args.focal_given, args.lens_given,
-                                  args.mirrored, args.eye_level, args.pitch):
+                                  args.mirrored, args.eye_level, args.pitch, args.as_video):
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
@@ -405,7 +414,8 @@ def run_eval_splits(args) -> int:
           + (" --lens-given" if args.lens_given else "")
           + (" --mirrored" if args.mirrored else "")
           + (" --eye-level" if args.eye_level else "")
-          + (f" --pitch {args.pitch:g}" if args.pitch else "") + ")")
+          + (f" --pitch {args.pitch:g}" if args.pitch else "")
+          + (" --as-video" if args.as_video else "") + ")")
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)

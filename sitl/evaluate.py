@@ -38,17 +38,18 @@ version, the seed, the index and the camera.
 from __future__ import annotations
 
 import math
+import multiprocessing
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
+from queue import Empty
 
 import cv2
 import numpy as np
 
 from companion.config import Config
-from companion.vision.lens import distort_px
 from companion.vision.pipeline import Pipeline
 from sitl.scene import (
     RENDERERS,
@@ -60,8 +61,8 @@ from sitl.scene import (
     render,
 )
 
-__all__ = ["View", "SceneResult", "EvalReport", "evaluate_scene", "run_eval", "format_report",
-           "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
+__all__ = ["View", "SceneResult", "EvalReport", "evaluate_scene", "evaluate_video", "run_eval",
+           "format_report", "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
            "run_clips", "clip_figures", "format_clips"]
 
 TARGETS = {
@@ -316,20 +317,59 @@ def evaluate_scene(
     focal length with ``assume_focal``, the lens too with ``assume_lens``), compare with
     the truth."""
     image, truth = draw_scene(renderer, seed, index, obstacle_share, view)
+    pipeline = Pipeline(_given(config or Config(), truth, assume_focal, assume_lens))
+    return _scene_result(index, view, image, truth, pipeline)
+
+
+def evaluate_video(
+    seed: int,
+    scenes: int,
+    config: Config | None = None,
+    obstacle_share: float = 0.7,
+    view: View = View(),
+    assume_focal: bool = False,
+    renderer: str = "scene",
+    mirrored: bool = False,
+    done=None,
+) -> list[SceneResult]:
+    """Scenes ``0 … scenes − 1`` of ``seed`` as ``view`` sees them, in order (each followed
+    by its mirror with ``mirrored``), through one pipeline: one camera's recording of many
+    rooms, as ``companion --video`` runs it. The focal length (unless ``assume_focal``) and
+    the lens are learnt across the frames; each frame's own η is compared with its truth.
+    ``done()`` is called after each frame."""
+    pipeline = None
+    out = []
+    for i in range(scenes):
+        for flip in orientations(mirrored):
+            seen = replace(view, mirrored=flip)
+            image, truth = draw_scene(renderer, seed, i, obstacle_share, seen)
+            if pipeline is None:  # every frame of a view has the same focal length
+                pipeline = Pipeline(_given(config or Config(), truth, assume_focal, False))
+            out.append(_scene_result(i, seen, image, truth, pipeline))
+            if done:
+                done()
+    return out
+
+
+def _given(config: Config, truth: SceneTruth, focal: bool, lens: bool) -> Config:
+    """``config`` given the rendered focal length (``focal``), or the focal length and the
+    lens (``lens``: the renderer's, or a pinhole for one that draws none)."""
+    if not (focal or lens):
+        return config
+    distortion = (truth.distortion or (0.0,)) if lens else config.camera.distortion
+    return replace(config, camera=replace(config.camera, focal_px=truth.focal_px,
+                                          distortion=distortion))
+
+
+def _scene_result(index: int, view: View, image: np.ndarray, truth: SceneTruth,
+                  pipeline: Pipeline) -> SceneResult:
+    """Run ``pipeline`` on one drawn frame and compare its estimate with the truth."""
     width, height = view.width, view.height
-    cfg = config or Config()
-    lens = assume_lens and bool(truth.distortion)
-    if assume_focal or assume_lens:
-        # The lens given: the renderer's, or a pinhole for one that draws none.
-        given = (truth.distortion or (0.0,)) if assume_lens else cfg.camera.distortion
-        cfg = replace(cfg, camera=replace(cfg.camera, focal_px=truth.focal_px,
-                                          distortion=given))
-    est = Pipeline(cfg)(image, camera_height_m=truth.camera_height_m)
+    est = pipeline(image, camera_height_m=truth.camera_height_m)
 
     def in_frame(points_px):
         """Pinhole pixels of the estimate → pixels of the frame, where the truth is."""
-        pts = np.asarray(points_px, dtype=float).reshape(-1, 2)
-        return distort_px(pts, width, height, truth.focal_px, truth.distortion) if lens else pts
+        return pipeline.frame_px(points_px, width, height)
 
     targets = [o for o in truth.obstacles if o.non_manhattan]
     detectable = [o for o in targets if o.detectable]
@@ -444,26 +484,62 @@ def format_report(report: EvalReport) -> list[str]:
 def run_split(renderer: str, split: str, config: Config | None = None,
               workers: int | None = None, progress=None, focal_given: bool = False,
               lens_given: bool = False, mirrored: bool = False,
-              eye_level: bool = False, pitch_deg: float = 0.0) -> dict[str, EvalReport]:
+              eye_level: bool = False, pitch_deg: float = 0.0,
+              as_video: bool = False) -> dict[str, EvalReport]:
     """One frozen split of one renderer at every camera of :data:`CAMERAS`, focal length
     not given (unless ``focal_given``, or ``lens_given``: the focal length and the lens
     distortion, diagnoses): {camera label: report}. ``mirrored``: each frame also run
     mirrored, pooled (:func:`run_eval`). ``eye_level``: the split's rooms seen from their
     rotated obstacle's height (:func:`sitl.scene.at_eye_level`). ``pitch_deg``: seen by the
-    camera pitched that much further nose down. ``progress(done, total)`` counts frames."""
+    camera pitched that much further nose down. ``as_video``: each camera's frames run in
+    order through one pipeline (:func:`evaluate_video`; not with ``lens_given``: the rooms'
+    lenses differ). ``progress(done, total)`` counts frames."""
     seed, scenes = SPLITS[(renderer, split)]
     per_camera = scenes * (2 if mirrored else 1)
     total = per_camera * len(CAMERAS)
+    views = {label: View(w, h, fov, eye_level=eye_level, pitch_deg=pitch_deg)
+             for label, w, h, fov in CAMERAS}
+    if as_video:
+        if lens_given:
+            raise ValueError("as_video learns the lens; the split's rooms each have their own")
+        return _run_videos(seed, scenes, config, views, focal_given, renderer, mirrored,
+                           workers, progress, total)
     out: dict[str, EvalReport] = {}
-    for k, (label, w, h, fov) in enumerate(CAMERAS):
+    for k, (label, view) in enumerate(views.items()):
         def step(done, _n, k=k):
             if progress:
                 progress(k * per_camera + done, total)
-        view = View(w, h, fov, eye_level=eye_level, pitch_deg=pitch_deg)
         out[label] = run_eval(scenes, seed, config, view=view, assume_focal=focal_given,
                               workers=workers, progress=step, renderer=renderer,
                               assume_lens=lens_given, mirrored=mirrored)
     return out
+
+
+def _video_worker(args):
+    *job, queue = args
+    return evaluate_video(*job, done=lambda: queue.put(1))
+
+
+def _run_videos(seed: int, scenes: int, config: Config | None, views: dict[str, View],
+                focal_given: bool, renderer: str, mirrored: bool, workers: int | None,
+                progress, total: int) -> dict[str, EvalReport]:
+    """:func:`evaluate_video` for each view, one process a view; ``progress`` counts frames."""
+    workers = min(workers or min(len(os.sched_getaffinity(0)), 4), len(views))
+    with multiprocessing.Manager() as manager, ProcessPoolExecutor(max_workers=workers) as pool:
+        queue = manager.Queue()
+        futures = {label: pool.submit(_video_worker, (seed, scenes, config, 0.7, view,
+                                                      focal_given, renderer, mirrored, queue))
+                   for label, view in views.items()}
+        done = 0
+        while done < total and not all(f.done() for f in futures.values()):
+            try:
+                done += queue.get(timeout=0.2)
+            except Empty:
+                continue
+            if progress:
+                progress(done, total)
+        return {label: EvalReport(scenes=scenes, seed=seed, results=f.result())
+                for label, f in futures.items()}
 
 
 def _split_target(label: str) -> dict[str, float]:
@@ -474,7 +550,7 @@ def _split_target(label: str) -> dict[str, float]:
 def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
                   focal_given: bool = False, lens_given: bool = False,
                   mirrored: bool = False, eye_level: bool = False,
-                  pitch_deg: float = 0.0) -> list[str]:
+                  pitch_deg: float = 0.0, as_video: bool = False) -> list[str]:
     """One table for a renderer: a row per camera and split, issue 18's targets beside;
     then, per row, the obstacles seen at eye level, by furniture kind, and the range."""
 
@@ -493,6 +569,9 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
         given += "; each room seen from its rotated obstacle's height"
     if pitch_deg:
         given += f"; the camera pitched {pitch_deg:g}° further nose down"
+    if as_video:
+        given += ("; each camera's frames run in order as one video (what it learns of its "
+                  "camera carried from frame to frame), η of each frame")
     lines = [f"renderer {renderer}: focal length {given}",
              f"{'camera':<14} {'split':<5} {'seed':>5} {'det %':>6} {'η med°':>7} {'η p90°':>7} "
              f"{'FP %':>5} {'sign✗':>7} {'corner %':>8} {'f err %':>10}   targets det/med/p90"]
@@ -634,7 +713,8 @@ def evaluate_clip(seed: int, clip: int, config: Config | None = None,
         detectable = [o for o in targets if o.detectable]
         target = (detectable or targets or [None])[0]
         if targets and est.obstacles:
-            target = _match(est.obstacles[0].corners_px, truth)[0] or target
+            corners = pipe.frame_px(est.obstacles[0].corners_px, image.shape[1], image.shape[0])
+            target = _match(corners, truth)[0] or target
         out.append(FrameResult(clip, k, bool(targets), bool(detectable),
                                None if target is None else target.eta_deg,
                                est.eta_deg, est.eta_tracked_deg, mirrored))

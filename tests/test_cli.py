@@ -347,6 +347,8 @@ def test_bench_and_sim_reject_bad_arguments_in_one_line():
     _assert_one_line_error(run("eval", "--pitch", "10"), "--pitch goes with --renderer")
     _assert_one_line_error(run("eval", "--renderer", "scene", "--pitch", "40"),
                            "give -30 to 30 degrees")
+    for extra in ((), ("--renderer", "scene", "--clips"), ("--renderer", "scene", "--lens-given")):
+        _assert_one_line_error(run("eval", "--as-video", *extra), "--as-video goes with --renderer")
 
 
 def test_dry_run_needs_no_mavlink_packages(sample_video):

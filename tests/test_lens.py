@@ -76,6 +76,31 @@ def test_eta_through_a_wide_lens_is_the_pinhole_eta_once_the_lens_is_given(yaw):
     assert undone.eta_deg == pytest.approx(eta, abs=0.5)  # ... and undone, it is back
 
 
+def test_positions_in_the_pipeline_picture_map_back_to_where_the_frame_shows_them():
+    # An Estimate's pixels are in the picture with the lens undone; the truth of a frame
+    # taken through the lens is in the frame. frame_px puts the lens back.
+    scene, cam = sample_scene()
+    image, truth = render(scene, cam)
+    lens = (-0.15,)
+    raw = through_lens(image, cam.focal_px, lens)
+    cfg = replace(Config(), camera=replace(Config().camera, focal_px=cam.focal_px,
+                                           distortion=lens))
+    pipe = Pipeline(cfg)
+    found = np.asarray(pipe(raw).obstacles[0].corners_px).reshape(-1, 2)
+    true_pinhole = np.asarray(truth.obstacles[0].corners_px).reshape(-1, 2)
+    true_raw = distort_px(true_pinhole, 640, 480, cam.focal_px, lens)
+
+    def miss(points, truth_points):
+        return np.linalg.norm(points[:, None] - truth_points[None], axis=2).min(axis=1)
+
+    back = pipe.frame_px(found, 640, 480)
+    assert miss(found, true_raw).max() > 5.0  # the lens moves a corner by more than 5 px
+    assert np.allclose(miss(back, true_raw), miss(found, true_pinhole), atol=1.0)
+    plain = Pipeline(replace(cfg, camera=replace(cfg.camera, distortion=(0.0,))))
+    plain(image)
+    assert np.array_equal(plain.frame_px(found, 640, 480), found)  # a pinhole: as they are
+
+
 def test_the_pathtraced_lens_as_opencv_coefficients():
     from sitl.pathtraced import distort_points, opencv_distortion
 

@@ -8,7 +8,14 @@ import pytest
 from companion.config import Config
 from companion.vision.geometry import direction_of, principal_point
 from companion.vision.pipeline import STAGES, Pipeline
-from sitl.evaluate import EvalReport, SceneResult, View, draw_scene, evaluate_scene
+from sitl.evaluate import (
+    EvalReport,
+    SceneResult,
+    View,
+    draw_scene,
+    evaluate_scene,
+    evaluate_video,
+)
 from sitl.sample import sample_scene
 from sitl.scene import (
     Box,
@@ -193,6 +200,24 @@ def test_evaluating_a_mirrored_frame_scores_it_against_the_mirrored_truth():
     assert flipped.eta_true_deg == pytest.approx(-plain.eta_true_deg) and plain.eta_true_deg < -10
     for r in (plain, flipped):
         assert r.eta_est_deg == pytest.approx(r.eta_true_deg, abs=1.0)
+
+
+def test_a_split_run_as_one_video_is_one_pipeline_over_its_frames_in_order():
+    # `companion eval --as-video`: rooms 0–3, each then its mirror, through one pipeline
+    # that carries its focal length from frame to frame, as `companion --video` does.
+    view = View(320, 240, 90.0)
+    results = evaluate_video(0, 4, view=view, mirrored=True)
+    order = [(i, flip) for i in range(4) for flip in (False, True)]
+    assert [(r.index, r.mirrored) for r in results] == order
+    by_hand = Pipeline(Config())
+    alone = []
+    for (i, flip), r in zip(order, results, strict=True):
+        image, truth = draw_scene("scene", 0, i, view=replace(view, mirrored=flip))
+        est = by_hand(image, camera_height_m=truth.camera_height_m)
+        assert (r.eta_est_deg, r.focal_est_px) == (est.eta_deg, est.focal_px)
+        alone.append(evaluate_scene(0, i, view=replace(view, mirrored=flip), assume_focal=False))
+    assert results[0].focal_est_px == alone[0].focal_est_px  # the first frame is on its own
+    assert any(r.focal_est_px != a.focal_est_px for r, a in zip(results, alone, strict=True))
 
 
 def test_a_pitched_view_is_the_same_room_seen_nose_down_and_its_box_is_found():

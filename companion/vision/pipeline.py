@@ -30,7 +30,7 @@ from companion.vision.corners import (
 )
 from companion.vision.geometry import focal_from_orthogonal_vps, principal_point
 from companion.vision.heading import closest_to_centre, heading_from_vp
-from companion.vision.lens import half_diagonal, radial_k, undistort_maps
+from companion.vision.lens import distort_px, half_diagonal, radial_k, undistort_maps
 from companion.vision.lines import (
     edge_step_z,
     extend_segments,
@@ -280,6 +280,7 @@ class Pipeline:
         self._lens_maps: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self.running_lens = RunningLens()
         self._lens_size: tuple[int, int] | None = None
+        self._last_lens: tuple[float, tuple[float, ...]] | None = None
         self._focal_size: tuple[int, int] | None = None
         vp = self.config.vision.vanishing
         self._known_focal_vp = replace(
@@ -396,29 +397,41 @@ class Pipeline:
         (:meth:`focal_for`). Only with D = f is η the bearing of the obstacle face."""
         return self.config.heading.depth_px or self.focal_for(width)
 
+    def _undone_lens(self, w: int, h: int) -> tuple[float, tuple[float, ...]] | None:
+        """The lens undone in frames of ``w``×``h`` (focal length and OpenCV's coefficients
+        it is written with), None when they are taken as they are: ``camera.distortion``
+        when given (``[0]``: a pinhole), else this video's :class:`RunningLens` once it has
+        settled."""
+        cam = self.config.camera
+        if cam.distortion is not None:
+            return (cam.focal_px, tuple(cam.distortion)) if any(cam.distortion) else None
+        k = self.running_lens.k if self._lens_size == (w, h) else None
+        return (half_diagonal(w, h), (k,)) if k else None
+
     def pinhole(self, frame: np.ndarray) -> np.ndarray:
         """The frame as every stage sees it: the lens's distortion undone
         (:mod:`~companion.vision.lens`; same size and focal length), else the frame
         itself. The lens is ``camera.distortion`` when given (``[0]``: a pinhole), else
         this video's :class:`RunningLens` once it has settled. Pixel positions in an
-        :class:`Estimate` are positions in this picture."""
-        cam = self.config.camera
+        :class:`Estimate` are positions in this picture (:meth:`frame_px` maps them back)."""
         h, w = frame.shape[:2]
-        if cam.distortion is not None:
-            if not any(cam.distortion):
-                return frame
-            key = (w, h, cam.focal_px, tuple(cam.distortion))
-            focal, coeffs = cam.focal_px, cam.distortion
-        else:
-            k = self.running_lens.k if self._lens_size == (w, h) else None
-            if not k:
-                return frame
-            key = (w, h, k)
-            focal, coeffs = half_diagonal(w, h), (k,)
+        lens = self._last_lens = self._undone_lens(w, h)
+        if lens is None:
+            return frame
+        key = (w, h, lens)
         if key not in self._lens_maps:
-            self._lens_maps[key] = undistort_maps(w, h, focal, coeffs)
+            self._lens_maps[key] = undistort_maps(w, h, *lens)
         mx, my = self._lens_maps[key]
         return cv2.remap(frame, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+    def frame_px(self, points_px: np.ndarray, width: int, height: int) -> np.ndarray:
+        """Positions in the last frame's pinhole picture (N×2 pixels, as its
+        :class:`Estimate` gives them) → where the ``width``×``height`` frame itself shows
+        them (N×2): the lens :meth:`pinhole` undid in it put back (a video's lens is
+        learnt during its first frames, so the next frame's may differ)."""
+        pts = np.asarray(points_px, dtype=float).reshape(-1, 2)
+        lens = self._last_lens
+        return pts if lens is None else distort_px(pts, width, height, *lens)
 
     def _learn_lens(self, segments: np.ndarray, w: int, h: int) -> None:
         """Add this frame's estimate to the video's lens, while it is being estimated: the
