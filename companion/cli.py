@@ -255,6 +255,8 @@ def dry_run(args) -> int:
     wall = time.perf_counter() - start
     for line in summary.lines(wall):
         print(line)
+    if not pipeline.config.camera.focal_px and summary.frames:  # it was to be estimated
+        print(pipeline.describe_focal())
     if pipeline.config.camera.distortion is None:  # the lens was to be learnt
         print(pipeline.running_lens.describe())
     if args.log:

@@ -108,13 +108,10 @@ class Summary:
 
     def __post_init__(self):
         self.latencies: list[float] = []
-        self.focal_estimates: list[float] = []
 
     def add(self, est: Estimate, latency_ms: float) -> None:
         self.frames += 1
         self.latencies.append(latency_ms)
-        if est.focal_source == "estimated":
-            self.focal_estimates.append(est.focal_px)
         if est.eta_deg is not None:
             self.with_obstacle += 1
             self.eta_min = est.eta_deg if self.eta_min is None else min(self.eta_min, est.eta_deg)
@@ -129,9 +126,6 @@ class Summary:
             f"latency: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms"
             f"   throughput: {fps:.1f} fps",
         ]
-        if self.focal_estimates:
-            out.append(f"focal length estimated from V1 ⟂ V2 on {len(self.focal_estimates)} of "
-                       f"{self.frames} frames: median {np.median(self.focal_estimates):.0f} px")
         return out
 
 

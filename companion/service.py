@@ -38,7 +38,7 @@ from companion.control.offboard import AutopilotNotFound, OffboardController
 from companion.control.policy import TurnHistory, decide_frame
 from companion.notify import notify
 from companion.report import log_record
-from companion.vision.pipeline import Pipeline
+from companion.vision.pipeline import FOCAL_MEMORY, Pipeline
 
 log = logging.getLogger("companion")
 
@@ -83,6 +83,7 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
     pipeline = Pipeline(config)
     history = TurnHistory()
     lens_told = False
+    focal_told = bool(config.camera.focal_px)  # a given one is not learnt
     while not stop.is_set():
         frame = frames.get(timeout_s=0.2)
         if frame is None:
@@ -93,6 +94,9 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
         if pipeline.running_lens.settled and not lens_told:
             log.info("%s", pipeline.running_lens.describe())
             lens_told = True
+        if len(pipeline.running_focal.estimates_px) >= FOCAL_MEMORY and not focal_told:
+            log.info("%s", pipeline.describe_focal())  # once its memory is full
+            focal_told = True
         eta, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, config.policy,
                                          history, est.scene_understood, est.range_m)
         controller.submit(cmd, eta, t_s=frame.captured_s,

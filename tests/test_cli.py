@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -12,6 +13,7 @@ import cv2
 import pytest
 
 from companion.report import LOG_KEYS
+from sitl.sample import sample_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 EXE = [sys.executable, "-m", "companion.cli"]
@@ -51,6 +53,10 @@ def test_dry_run_writes_exact_log_records(sample_video, tmp_path):
     assert "latency: median" in r.stdout
     # Six frames are too few to learn the lens from: the summary says so.
     assert "lens: not learnt, 6 of the 9 frames it needs" in r.stdout
+    # The focal length learnt: the sample's 80° lens, steady enough to give from frame 1.
+    told = re.search(r"focal length: (\d+) px \(80° across\).*steady: --focal-px (\d+)",
+                     r.stdout)
+    assert told and told[1] == told[2] and abs(int(told[1]) / sample_scene()[1].focal_px - 1) < 0.02
     assert "Traceback" not in r.stderr
 
 

@@ -117,6 +117,19 @@ def test_the_focal_estimate_is_carried_from_frame_to_frame_and_is_d_of_eq10():
     assert len(errors) >= 6 and np.median(errors) < 1.5
 
 
+def test_the_learnt_focal_length_is_offered_for_the_config_only_when_steady():
+    from companion.vision.pipeline import RunningFocal
+
+    steady = RunningFocal((550.0, 556.0, 554.0, 553.0, 558.0, 552.0))
+    assert "554 px (60° across)" in steady.describe(640)
+    assert "steady: --focal-px 554" in steady.describe(640)
+    # Two cameras' frames, or views that cannot fix it: the value is told, not offered.
+    mixed = RunningFocal((320.0, 554.0, 330.0, 560.0, 325.0, 550.0))
+    assert "not steady enough" in mixed.describe(640)
+    assert "--focal-px" not in RunningFocal((554.0, 555.0)).describe(640)  # too few
+    assert "not estimated" in RunningFocal().describe(640)
+
+
 def test_a_configured_depth_overrides_the_focal_length():
     scene, cam = sample_scene()
     image, _ = render(scene, cam)

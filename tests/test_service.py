@@ -5,6 +5,7 @@ import asyncio
 import json
 import logging
 import os
+import re
 import shutil
 import socket
 import subprocess
@@ -22,7 +23,7 @@ from companion.capture import CaptureError, ImageFolder, LatestFrame, VideoFile,
 from companion.config import Config
 from companion.control.offboard import OffboardController
 from companion.notify import notify
-from companion.vision.pipeline import LENS_FRAMES
+from companion.vision.pipeline import FOCAL_MEMORY, LENS_FRAMES
 from sitl.autopilot import OFFBOARD, AutopilotParams, MockAutopilot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -227,6 +228,9 @@ def test_companion_run_flies_the_mock_by_the_video_and_stops_on_sigterm(tmp_path
     # The sample's lens is learnt on its first frames and told once, in the journal.
     assert len(records) >= LENS_FRAMES
     assert output.count("lens: radial k +0.00") == 1, output
+    # So is the focal length, once its memory is full (every sample frame estimates it).
+    told = re.findall(r"focal length: (\d+) px \(80° across\)", output)
+    assert len(told) == (len(records) >= FOCAL_MEMORY), output
 
 
 def test_run_refuses_a_bad_config_key_in_one_line(tmp_path):

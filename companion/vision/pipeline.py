@@ -87,6 +87,10 @@ FOCAL_WARMUP = 5
 """estimates gathered by full per-frame self-calibration before the running estimate is
 trusted as the one guess a frame is searched with"""
 
+FOCAL_STEADY = 0.1
+"""a video's focal-length estimates whose middle 80 % spans at most this share of their
+median are one camera's, seen well: a value worth writing into the configuration"""
+
 
 LENS_FRAMES = 9
 """frames whose lens estimates (:func:`~companion.vision.lens.radial_k`) the video's lens is
@@ -129,6 +133,22 @@ class RunningFocal:
 
     def add(self, focal_px: float) -> RunningFocal:
         return RunningFocal((self.estimates_px + (float(focal_px),))[-FOCAL_MEMORY:])
+
+    def describe(self, width: int) -> str:
+        """One line for a person: what was learnt for frames ``width`` pixels wide, and
+        whether it is steady enough to give (``camera.focal_px``) from the first frame on."""
+        if not self.estimates_px:
+            return ("focal length: not estimated (no frame showed both horizontal room "
+                    f"axes); half the width assumed, {width / 2:.0f} px")
+        f, n = self.focal_px, len(self.estimates_px)
+        lo, hi = np.percentile(self.estimates_px, [10, 90])
+        hfov = math.degrees(2 * math.atan(width / 2 / f))
+        text = (f"focal length: {f:.0f} px ({hfov:.0f}° across), the median of the last {n} "
+                f"frames' estimates (10–90 %: {lo:.0f}–{hi:.0f} px)")
+        if n >= FOCAL_WARMUP and hi - lo <= FOCAL_STEADY * f:
+            return text + f"; steady: --focal-px {f:.0f} (camera.focal_px) gives it from frame 1"
+        return text + ("; not steady enough to give: too few frames, more than one camera, "
+                       "or views that do not fix it")
 
 
 @dataclass(frozen=True)
@@ -386,6 +406,14 @@ class Pipeline:
         if unconfirmed is not None:
             return unconfirmed, "estimated"
         return first, "assumed"
+
+    def describe_focal(self) -> str:
+        """One line for a person: the focal length this video taught, for the frame size
+        it was learnt at (:meth:`RunningFocal.describe`)."""
+        if self.config.camera.focal_px:
+            return f"focal length: {self.config.camera.focal_px:g} px, given"
+        width = self._focal_size[0] if self._focal_size else 0
+        return self.running_focal.describe(width) if width else "focal length: no frame seen"
 
     def focal_for(self, width: int) -> float:
         """The focal length in pixels: given, else this video's running estimate, else half
