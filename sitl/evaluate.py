@@ -10,7 +10,9 @@ aligned with the room).
 
 Each renderer has two frozen splits (:data:`SPLITS`): ``dev``, looked at while developing,
 and ``test``, only ever run whole, after a change is decided. A split is evaluated at the
-three cameras of :data:`CAMERAS` without the focal length given.
+three cameras of :data:`CAMERAS` without the focal length given, each frame alone (a fresh
+pipeline), or with ``as_video`` each camera's frames in order through one pipeline, as
+``companion --video`` runs a recording (:func:`evaluate_video`).
 
 Figures:
 
