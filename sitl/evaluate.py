@@ -533,10 +533,12 @@ def _run_videos(seed: int, scenes: int, config: Config | None, views: dict[str, 
                                                       focal_given, renderer, mirrored, queue))
                    for label, view in views.items()}
         done = 0
-        while done < total and not all(f.done() for f in futures.values()):
+        while done < total:
             try:
                 done += queue.get(timeout=0.2)
             except Empty:
+                if all(f.done() for f in futures.values()):  # a worker failed: its error
+                    break
                 continue
             if progress:
                 progress(done, total)

@@ -233,6 +233,24 @@ def test_a_split_run_as_one_video_is_one_pipeline_over_its_frames_in_order():
     assert any(r.focal_est_px != a.focal_est_px for r, a in zip(results, alone, strict=True))
 
 
+def test_split_videos_run_one_process_a_camera_and_count_every_frame():
+    # run_split(as_video=True)'s runner: each view's frames in a process of their own,
+    # the same results as one pipeline in this process, and progress counted per frame.
+    from sitl.evaluate import _run_videos
+
+    views = {"90": View(320, 240, 90.0), "60": View(320, 240, 60.0)}
+    calls = []
+    reports = _run_videos(0, 3, None, views, False, "scene", True, 2,
+                          lambda done, total: calls.append((done, total)), 12)
+    for label, view in views.items():
+        here = evaluate_video(0, 3, view=view, mirrored=True)
+        assert [(r.index, r.mirrored, r.eta_est_deg, r.focal_est_px)
+                for r in reports[label].results] == [
+            (r.index, r.mirrored, r.eta_est_deg, r.focal_est_px) for r in here]
+    assert calls and calls[-1] == (12, 12) and [d for d, _ in calls] == sorted(
+        d for d, _ in calls)
+
+
 def test_a_pitched_view_is_the_same_room_seen_nose_down_and_its_box_is_found():
     # `companion eval --pitch 20`: room 82 of seed 0 seen by the camera pitched 20° further
     # nose down. V3 comes 20° nearer the optical axis, and the box, 32° off the room, is
