@@ -405,6 +405,11 @@ def _scene_result(index: int, view: View, image: np.ndarray, truth: SceneTruth,
     )
 
 
+def _workers(workers: int | None) -> int:
+    """Processes for a run: as asked, else the cores this process may use, at most 4."""
+    return workers or min(len(os.sched_getaffinity(0)), 4)
+
+
 def _worker(args):
     return evaluate_scene(*args)
 
@@ -430,7 +435,7 @@ def run_eval(
              renderer, assume_lens)
             for i in range(scenes) for flip in orientations(mirrored)]
     total = len(jobs)
-    workers = workers or min(len(os.sched_getaffinity(0)), 4)
+    workers = _workers(workers)
     results: list[SceneResult] = []
     if workers <= 1:
         for job in jobs:
@@ -505,7 +510,7 @@ def run_split(renderer: str, split: str, config: Config | None = None,
         if lens_given:
             raise ValueError("as_video learns the lens; the split's rooms each have their own")
         return _run_videos(seed, scenes, config, views, focal_given, renderer, mirrored,
-                           workers, progress, total)
+                           workers, progress)
     out: dict[str, EvalReport] = {}
     for k, (label, view) in enumerate(views.items()):
         def step(done, _n, k=k):
@@ -524,9 +529,10 @@ def _video_worker(args):
 
 def _run_videos(seed: int, scenes: int, config: Config | None, views: dict[str, View],
                 focal_given: bool, renderer: str, mirrored: bool, workers: int | None,
-                progress, total: int) -> dict[str, EvalReport]:
+                progress) -> dict[str, EvalReport]:
     """:func:`evaluate_video` for each view, one process a view; ``progress`` counts frames."""
-    workers = min(workers or min(len(os.sched_getaffinity(0)), 4), len(views))
+    total = scenes * len(orientations(mirrored)) * len(views)
+    workers = min(_workers(workers), len(views))
     with multiprocessing.Manager() as manager, ProcessPoolExecutor(max_workers=workers) as pool:
         queue = manager.Queue()
         futures = {label: pool.submit(_video_worker, (seed, scenes, config, 0.7, view,
@@ -736,7 +742,7 @@ def run_clips(split: str, config: Config | None = None, workers: int | None = No
     :data:`LONG_CLIPS`); with ``mirrored`` each clip also mirrored, the two pooled."""
     seed, clips = (LONG_CLIPS if long else CLIPS)[(renderer, split)]
     length = LONG_CLIP_FRAMES if long else CLIP_FRAMES
-    workers = workers or min(len(os.sched_getaffinity(0)), 4)
+    workers = _workers(workers)
     out: list[FrameResult] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
         jobs = [(seed, i, config, 0.7, length, renderer, flip) for i in range(clips)

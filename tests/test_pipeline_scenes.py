@@ -241,7 +241,7 @@ def test_split_videos_run_one_process_a_camera_and_count_every_frame():
     views = {"90": View(320, 240, 90.0), "60": View(320, 240, 60.0)}
     calls = []
     reports = _run_videos(0, 3, None, views, False, "scene", True, 2,
-                          lambda done, total: calls.append((done, total)), 12)
+                          lambda done, total: calls.append((done, total)))
     for label, view in views.items():
         here = evaluate_video(0, 3, view=view, mirrored=True)
         assert [(r.index, r.mirrored, r.eta_est_deg, r.focal_est_px)
