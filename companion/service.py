@@ -83,7 +83,7 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
     pipeline = Pipeline(config)
     history = TurnHistory()
     lens_told = False
-    focal_told = bool(config.camera.focal_px)  # a given one is not learnt
+    focal_told = False  # a given focal length gathers no estimates: never told
     while not stop.is_set():
         frame = frames.get(timeout_s=0.2)
         if frame is None:

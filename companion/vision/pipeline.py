@@ -409,9 +409,7 @@ class Pipeline:
 
     def describe_focal(self) -> str:
         """One line for a person: the focal length this video taught, for the frame size
-        it was learnt at (:meth:`RunningFocal.describe`)."""
-        if self.config.camera.focal_px:
-            return f"focal length: {self.config.camera.focal_px:g} px, given"
+        it was learnt at (:meth:`RunningFocal.describe`); a given one is never learnt."""
         width = self._focal_size[0] if self._focal_size else 0
         return self.running_focal.describe(width) if width else "focal length: no frame seen"
 
