@@ -8,8 +8,11 @@ pooled rows of ``companion eval`` hide that (a gained and a lost detection cance
 list the frames that changed.
 
 Each line is one frame: where it came from (``renderer``, ``split``, ``seed``,
-``camera``) and every field of :class:`~sitl.evaluate.SceneResult`. A frame is identified
-by ``renderer``, ``split``, ``seed``, ``camera``, ``index`` and ``mirrored``.
+``camera``, ``view``), how the run read it (``reading``) and every field of
+:class:`~sitl.evaluate.SceneResult`. A frame is identified by ``renderer``, ``split``,
+``seed``, ``camera``, ``view``, ``index`` and ``mirrored``: the same frame read two ways
+(each frame alone, or the split run as a video) is compared, and the diff says so; a room
+seen from elsewhere (``--eye-level``, ``--pitch``) is another frame.
 """
 
 from __future__ import annotations
@@ -19,22 +22,37 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-__all__ = ["FrameChange", "frame_rows", "read_frames", "frame_changes", "format_changes"]
+__all__ = ["FrameChange", "frame_rows", "read_frames", "readings", "frame_changes",
+           "format_changes"]
 
 KEY_FIELDS = ("renderer", "split", "seed", "camera", "index", "mirrored")
-"""the fields that identify a frame across runs"""
+"""the fields that identify a frame across runs, with ``view``"""
+
+AS_DRAWN = "as drawn"
+"""the ``view`` of a room seen from where its draw put the camera (files written before
+rows had a ``view`` hold only such frames)"""
+
+EACH_FRAME = "each frame alone"
+"""the ``reading`` of a run that scores every frame through a pipeline of its own"""
 
 OUTCOME_FIELDS = ("has_obstacle", "detectable", "eta_true_deg", "eta_est_deg")
 """the fields :func:`frame_changes` compares"""
 
 
 def frame_rows(results: Iterable, renderer: str, split: str | None, seed: int,
-               camera: str) -> list[dict]:
+               camera: str, view: str = AS_DRAWN, reading: str = EACH_FRAME) -> list[dict]:
     """One dict per :class:`~sitl.evaluate.SceneResult` of a run, with where it came from:
     ``renderer``, ``split`` (None outside the frozen splits), ``seed``, ``camera`` (a
-    label of :data:`~sitl.evaluate.CAMERAS` or ``W×H``)."""
+    label of :data:`~sitl.evaluate.CAMERAS` or ``W×H``), ``view`` (where the camera
+    stands, e.g. ``eye level, pitched 10°``), and how the run read it: ``reading`` (e.g.
+    ``as a video, focal length given``)."""
     return [{"renderer": renderer, "split": split, "seed": seed, "camera": camera,
-             **asdict(r)} for r in results]
+             "view": view, "reading": reading, **asdict(r)} for r in results]
+
+
+def readings(rows: list[dict]) -> set[str]:
+    """The readings of a run's rows (files written before rows had one: each frame alone)."""
+    return {r.get("reading", EACH_FRAME) for r in rows}
 
 
 def read_frames(path: str | Path) -> list[dict]:
@@ -78,6 +96,7 @@ class FrameChange:
     eta_true_deg: float | None
     old_eta_deg: float | None
     new_eta_deg: float | None
+    view: str = AS_DRAWN
 
     @property
     def old_err_deg(self) -> float | None:
@@ -93,7 +112,7 @@ def _err(eta: float | None, truth: float | None) -> float | None:
 
 
 def _key(row: dict) -> tuple:
-    return tuple(row[k] for k in KEY_FIELDS)
+    return (*(row[k] for k in KEY_FIELDS), row.get("view", AS_DRAWN))
 
 
 def frame_changes(old: list[dict], new: list[dict], eta_tol_deg: float = 1.0
@@ -124,30 +143,35 @@ def frame_changes(old: list[dict], new: list[dict], eta_tol_deg: float = 1.0
         if what:
             changes.append(FrameChange(r["renderer"], r["split"], r["seed"], r["camera"],
                                        r["index"], r["mirrored"], what, r.get("kind"),
-                                       r["eta_true_deg"], was, now))
+                                       r["eta_true_deg"], was, now, r.get("view", AS_DRAWN)))
     return changes, shared
 
 
 WHAT_ORDER = ("gained", "lost", "false alarm", "false alarm gone", "eta")
 
 
-def format_changes(changes: list[FrameChange], shared: int, eta_tol_deg: float = 1.0
+def format_changes(changes: list[FrameChange], shared: int, eta_tol_deg: float = 1.0,
+                   old_reading: str | None = None, new_reading: str | None = None
                    ) -> list[str]:
     """Printable lines: a count per kind of change for each renderer, split and camera,
-    then one line per changed frame."""
+    then one line per changed frame. Where the two runs read their frames differently
+    (``old_reading``, ``new_reading``), the first line says how each did."""
 
     def deg(x: float | None) -> str:
         return "—" if x is None else f"{x:+.1f}°"
 
     lines = [f"{shared} frames in both runs; {len(changes)} changed "
              f"(an η error that moved by more than {eta_tol_deg:g}° counts)"]
+    if old_reading != new_reading:
+        lines[0] += f"; old run: {old_reading}; new run: {new_reading}"
     groups: dict[tuple, list[FrameChange]] = {}
     for c in changes:
-        groups.setdefault((c.renderer, c.split, c.seed, c.camera), []).append(c)
-    for (renderer, split, seed, camera), cs in groups.items():
+        groups.setdefault((c.renderer, c.split, c.seed, c.camera, c.view), []).append(c)
+    for (renderer, split, seed, camera, view), cs in groups.items():
         counts = ", ".join(f"{sum(c.what == w for c in cs)} {w}" for w in WHAT_ORDER
                            if any(c.what == w for c in cs))
         where = f"{renderer} {split}" if split else f"{renderer} seed {seed}"
+        where += "" if view == AS_DRAWN else f", {view}"
         lines.append(f"{camera}, {where}: {counts}")
         for c in sorted(cs, key=lambda c: (WHAT_ORDER.index(c.what), c.index, c.mirrored)):
             frame = f"{c.index}{' mirrored' if c.mirrored else ''}"

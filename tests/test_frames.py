@@ -5,7 +5,7 @@ import json
 import pytest
 
 from sitl.evaluate import SceneResult
-from sitl.frames import format_changes, frame_changes, frame_rows, read_frames
+from sitl.frames import format_changes, frame_changes, frame_rows, read_frames, readings
 
 
 def result(index, eta_est, eta_true=30.0, detectable=True, has_obstacle=True, mirrored=False):
@@ -80,3 +80,23 @@ def test_a_line_that_is_not_a_frame_row_is_named(tmp_path):
     path.write_text("not json\n")
     with pytest.raises(ValueError, match=r"f\.jsonl:1: not JSON"):
         read_frames(path)
+
+
+def test_the_diff_says_how_each_run_read_its_frames_and_keeps_views_apart():
+    alone = rows([result(0, None), result(1, 30.0)])
+    video = frame_rows([result(0, 30.4), result(1, 30.0)], "pathtraced", "dev", 11,
+                       "640×480, 90°", reading="as a video")
+    changes, shared = frame_changes(alone, video)
+    assert shared == 2 and [c.what for c in changes] == ["gained"]
+    first = format_changes(changes, shared, old_reading="each frame alone",
+                           new_reading="as a video")[0]
+    assert first.endswith("; old run: each frame alone; new run: as a video")
+    # The same room seen from the height of the obstacle's top is another frame.
+    higher = frame_rows([result(0, 30.4)], "pathtraced", "dev", 11, "640×480, 90°",
+                        view="eye level")
+    assert frame_changes(alone, higher) == ([], 0)
+    # A file written before rows had a view or a reading: as drawn, each frame alone.
+    for row in alone:
+        del row["view"], row["reading"]
+    assert frame_changes(alone, video)[1] == 2
+    assert readings(alone) == {"each frame alone"}
