@@ -136,11 +136,37 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _clock(seconds: float) -> str:
+    """``m:ss``, or ``h:mm:ss`` from an hour on."""
+    m, sec = divmod(int(round(seconds)), 60)
+    h, m = divmod(m, 60)
+    return f"{h}:{m:02d}:{sec:02d}" if h else f"{m}:{sec:02d}"
+
+
+def progress_line(done: int, total: int, elapsed_s: float, extra: str = "") -> str:
+    """One progress line: a bar of ``done`` of ``total`` (a count alone when the total is
+    unknown), what is being done (``extra``), the time taken so far and, once a second has
+    passed and something is done, the time left at the rate so far."""
+    if total > 0:
+        filled = int(30 * min(done / total, 1.0))
+        line = f"[{'#' * filled}{'.' * (30 - filled)}] {done}/{total}"
+    else:
+        line = f"{done}"
+    if extra:
+        line += f" {extra}"
+    if elapsed_s >= 1.0:
+        line += f"  {_clock(elapsed_s)}"
+        if total > 0 and 0 < done < total:
+            line += f", ~{_clock(elapsed_s * (total - done) / done)} left"
+    return line
+
+
 class _Progress:
     """A one-line progress bar on stderr, only when stderr is a terminal."""
 
     def __init__(self, enabled: bool):
         self.enabled = enabled and sys.stderr.isatty()
+        self._start = time.monotonic()
         self._last = 0.0
 
     def update(self, done: int, total: int, extra: str = "") -> None:
@@ -148,12 +174,7 @@ class _Progress:
         if not self.enabled or (now - self._last < 0.1 and done != total):
             return
         self._last = now
-        if total > 0:
-            filled = int(30 * min(done / total, 1.0))
-            bar = f"[{'#' * filled}{'.' * (30 - filled)}] {done}/{total}"
-        else:
-            bar = f"{done}"
-        sys.stderr.write(f"\r{bar} {extra}\033[K")
+        sys.stderr.write(f"\r{progress_line(done, total, now - self._start, extra)}\033[K")
         sys.stderr.flush()
 
     def close(self) -> None:

@@ -374,3 +374,17 @@ def test_version_is_the_installed_package_version():
     proc = run("--version")
     assert proc.returncode == 0
     assert proc.stdout.strip() == f"companion {version('companion')}"
+
+
+def test_a_progress_line_tells_the_time_taken_and_the_time_left_at_the_rate_so_far():
+    from companion.cli import progress_line
+
+    assert progress_line(0, 720, 0.2, "pathtraced dev") == (
+        "[..............................] 0/720 pathtraced dev")
+    # 180 of 720 frames in 5 minutes: 15 minutes to go at that rate.
+    line = progress_line(180, 720, 300.0, "pathtraced dev")
+    assert line.startswith("[#######.......................] 180/720 pathtraced dev")
+    assert line.endswith("  5:00, ~15:00 left")
+    assert progress_line(1, 3, 2000.0).endswith("  33:20, ~1:06:40 left")
+    assert progress_line(720, 720, 61.0).endswith("720/720  1:01")  # done: nothing left
+    assert progress_line(42, 0, 3.0, "frames") == "42 frames  0:03"  # a total unknown
