@@ -349,25 +349,12 @@ def run_eval(args) -> int:
         with _open_output(args.json, "figures") as f:
             json.dump(report.figures(), f, indent=2)
     if args.frames:
-        from sitl.frames import EACH_FRAME, frame_rows
+        from sitl.frames import frame_rows, reading_of
 
         _write_frames(args.frames, frame_rows(
             report.results, "scene", None, args.seed, f"{args.width}×{args.height}",
-            reading=EACH_FRAME + ("" if args.no_focal else ", focal length given")))
+            reading=reading_of(focal_given=not args.no_focal)))
     return 0
-
-
-def _frames_view_and_reading(args) -> tuple[str, str]:
-    """A split run's ``view`` and ``reading`` for its ``--frames`` rows (sitl/frames.py):
-    where the camera stands, and how the frames were read."""
-    from sitl.frames import AS_DRAWN, EACH_FRAME
-
-    where = (["eye level"] if args.eye_level else []) + (
-        [f"pitched {args.pitch:g}°"] if args.pitch else [])
-    how = ["as a video" if args.as_video else EACH_FRAME] + (
-        ["focal length given"] if args.focal_given else []) + (
-        ["lens given"] if args.lens_given else [])
-    return ", ".join(where) or AS_DRAWN, ", ".join(how)
 
 
 def _write_frames(path: str, rows: list[dict]) -> None:
@@ -379,7 +366,7 @@ def _write_frames(path: str, rows: list[dict]) -> None:
 
 def run_eval_diff(args) -> int:
     """``companion eval --diff OLD NEW``: the frames whose outcome changed."""
-    from sitl.frames import format_changes, frame_changes, read_frames, readings
+    from sitl.frames import format_changes, frame_changes, read_frames
 
     if args.renderer or args.yud or args.frames:
         raise UserError("--diff compares two --frames files; it runs nothing itself")
@@ -395,7 +382,7 @@ def run_eval_diff(args) -> int:
     if not shared:
         raise UserError(f"{args.diff[0]} and {args.diff[1]} share no frame (another split, "
                         "seed or camera?)")
-    old, new = (" / ".join(sorted(readings(rows))) for rows in runs)
+    old, new = (" / ".join(sorted({r["reading"] for r in rows})) for rows in runs)
     for line in format_changes(changes, shared, old_reading=old, new_reading=new):
         print(line)
     return 0
@@ -458,9 +445,10 @@ def run_eval_splits(args) -> int:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)
     if args.frames:
-        from sitl.frames import frame_rows
+        from sitl.frames import frame_rows, reading_of, view_of
 
-        view, reading = _frames_view_and_reading(args)
+        view = view_of(args.eye_level, args.pitch)
+        reading = reading_of(args.as_video, args.focal_given, args.lens_given)
         _write_frames(args.frames, [
             row for renderer, reports in by_renderer.items() for s, by_cam in reports.items()
             for cam, rep in by_cam.items()

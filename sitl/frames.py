@@ -22,21 +22,38 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-__all__ = ["FrameChange", "frame_rows", "read_frames", "readings", "frame_changes",
+__all__ = ["FrameChange", "view_of", "reading_of", "frame_rows", "read_frames", "frame_changes",
            "format_changes"]
 
-KEY_FIELDS = ("renderer", "split", "seed", "camera", "index", "mirrored")
-"""the fields that identify a frame across runs, with ``view``"""
+KEY_FIELDS = ("renderer", "split", "seed", "camera", "view", "index", "mirrored")
+"""the fields that identify a frame across runs"""
 
 AS_DRAWN = "as drawn"
 """the ``view`` of a room seen from where its draw put the camera (files written before
 rows had a ``view`` hold only such frames)"""
 
 EACH_FRAME = "each frame alone"
-"""the ``reading`` of a run that scores every frame through a pipeline of its own"""
+"""the ``reading`` of a run that scores every frame through a pipeline of its own (files
+written before rows had a ``reading`` hold only such runs)"""
 
 OUTCOME_FIELDS = ("has_obstacle", "detectable", "eta_true_deg", "eta_est_deg")
 """the fields :func:`frame_changes` compares"""
+
+
+def view_of(eye_level: bool = False, pitch_deg: float = 0.0) -> str:
+    """A row's ``view``: where the camera stood (``--eye-level``, ``--pitch``)."""
+    where = (["eye level"] if eye_level else []) + (
+        [f"pitched {pitch_deg:g}°"] if pitch_deg else [])
+    return ", ".join(where) or AS_DRAWN
+
+
+def reading_of(as_video: bool = False, focal_given: bool = False,
+               lens_given: bool = False) -> str:
+    """A row's ``reading``: how the run read its frames (``--as-video``, the focal length
+    or the lens given)."""
+    return ", ".join(["as a video" if as_video else EACH_FRAME]
+                     + (["focal length given"] if focal_given else [])
+                     + (["lens given"] if lens_given else []))
 
 
 def frame_rows(results: Iterable, renderer: str, split: str | None, seed: int,
@@ -50,14 +67,10 @@ def frame_rows(results: Iterable, renderer: str, split: str | None, seed: int,
              "view": view, "reading": reading, **asdict(r)} for r in results]
 
 
-def readings(rows: list[dict]) -> set[str]:
-    """The readings of a run's rows (files written before rows had one: each frame alone)."""
-    return {r.get("reading", EACH_FRAME) for r in rows}
-
-
 def read_frames(path: str | Path) -> list[dict]:
-    """The rows of a ``--frames`` file. Raises ValueError, naming the line, on one that
-    is not a frame row."""
+    """The rows of a ``--frames`` file, those of a file written before rows had a ``view``
+    and a ``reading`` given the only ones there were. Raises ValueError, naming the line,
+    on one that is not a frame row."""
     rows = []
     with open(path, encoding="utf-8") as f:
         for n, line in enumerate(f, 1):
@@ -67,6 +80,9 @@ def read_frames(path: str | Path) -> list[dict]:
                 row = json.loads(line)
             except json.JSONDecodeError:
                 raise ValueError(f"{path}:{n}: not JSON") from None
+            if isinstance(row, dict):
+                row.setdefault("view", AS_DRAWN)
+                row.setdefault("reading", EACH_FRAME)
             if not isinstance(row, dict) or any(k not in row
                                                 for k in KEY_FIELDS + OUTCOME_FIELDS):
                 raise ValueError(f"{path}:{n}: not a frame row (companion eval --frames)")
@@ -112,7 +128,7 @@ def _err(eta: float | None, truth: float | None) -> float | None:
 
 
 def _key(row: dict) -> tuple:
-    return (*(row[k] for k in KEY_FIELDS), row.get("view", AS_DRAWN))
+    return tuple(row[k] for k in KEY_FIELDS)
 
 
 def frame_changes(old: list[dict], new: list[dict], eta_tol_deg: float = 1.0
@@ -143,7 +159,7 @@ def frame_changes(old: list[dict], new: list[dict], eta_tol_deg: float = 1.0
         if what:
             changes.append(FrameChange(r["renderer"], r["split"], r["seed"], r["camera"],
                                        r["index"], r["mirrored"], what, r.get("kind"),
-                                       r["eta_true_deg"], was, now, r.get("view", AS_DRAWN)))
+                                       r["eta_true_deg"], was, now, r["view"]))
     return changes, shared
 
 

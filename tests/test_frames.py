@@ -5,7 +5,7 @@ import json
 import pytest
 
 from sitl.evaluate import SceneResult
-from sitl.frames import format_changes, frame_changes, frame_rows, read_frames, readings
+from sitl.frames import format_changes, frame_changes, frame_rows, read_frames, reading_of, view_of
 
 
 def result(index, eta_est, eta_true=30.0, detectable=True, has_obstacle=True, mirrored=False):
@@ -82,7 +82,7 @@ def test_a_line_that_is_not_a_frame_row_is_named(tmp_path):
         read_frames(path)
 
 
-def test_the_diff_says_how_each_run_read_its_frames_and_keeps_views_apart():
+def test_the_diff_says_how_each_run_read_its_frames_and_keeps_views_apart(tmp_path):
     alone = rows([result(0, None), result(1, 30.0)])
     video = frame_rows([result(0, 30.4), result(1, 30.0)], "pathtraced", "dev", 11,
                        "640×480, 90°", reading="as a video")
@@ -98,5 +98,17 @@ def test_the_diff_says_how_each_run_read_its_frames_and_keeps_views_apart():
     # A file written before rows had a view or a reading: as drawn, each frame alone.
     for row in alone:
         del row["view"], row["reading"]
-    assert frame_changes(alone, video)[1] == 2
-    assert readings(alone) == {"each frame alone"}
+    path = tmp_path / "old.jsonl"
+    path.write_text("".join(json.dumps(r, ensure_ascii=False) + "\n" for r in alone))
+    back = read_frames(path)
+    assert frame_changes(back, video)[1] == 2
+    assert {r["reading"] for r in back} == {"each frame alone"}
+
+
+def test_a_rows_view_and_reading_say_what_the_run_options_were():
+    assert view_of() == "as drawn"
+    assert view_of(eye_level=True, pitch_deg=10.0) == "eye level, pitched 10°"
+    assert reading_of() == "each frame alone"
+    assert reading_of(as_video=True, focal_given=True) == "as a video, focal length given"
+    assert reading_of(focal_given=True, lens_given=True) == (
+        "each frame alone, focal length given, lens given")
