@@ -65,7 +65,7 @@ from sitl.scene import (
 
 __all__ = ["View", "SceneResult", "EvalReport", "evaluate_scene", "evaluate_video", "run_eval",
            "format_report", "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
-           "run_clips", "clip_figures", "format_clips"]
+           "run_clips", "clip_figures", "format_clips", "drawing_order"]
 
 TARGETS = {
     "eta_err_median_deg": 1.5,
@@ -414,6 +414,15 @@ def _worker(args):
     return evaluate_scene(*args)
 
 
+def drawing_order(count: int, mirrored: bool) -> list[tuple[int, bool]]:
+    """The (item, mirrored) jobs of a parallel run over ``count`` scenes or clips: every
+    item as drawn first, then (with ``mirrored``) every mirror. A mirror is its item's
+    render flipped, so an item and its mirror side by side would have two workers path-trace
+    one frame at once; in this order the mirrors read the cache. Results are put back in
+    (item, mirrored) order (:func:`orientations`) by the caller."""
+    return [(i, flip) for flip in orientations(mirrored) for i in range(count)]
+
+
 def run_eval(
     scenes: int = 200,
     seed: int = 0,
@@ -431,9 +440,9 @@ def run_eval(
     is called as they finish. With ``mirrored``, each scene is also evaluated mirrored
     left to right, and the report pools both: twice the results, for telling a rule change
     from chance on dev. ``mirrored``, not ``view.mirrored``, decides the orientations."""
+    order = drawing_order(scenes, mirrored)
     jobs = [(seed, i, config, obstacle_share, replace(view, mirrored=flip), assume_focal,
-             renderer, assume_lens)
-            for i in range(scenes) for flip in orientations(mirrored)]
+             renderer, assume_lens) for i, flip in order]
     total = len(jobs)
     workers = _workers(workers)
     results: list[SceneResult] = []
@@ -448,6 +457,7 @@ def run_eval(
                 results.append(r)
                 if progress:
                     progress(len(results), total)
+    results = [r for _, r in sorted(zip(order, results, strict=True), key=lambda pair: pair[0])]
     return EvalReport(scenes=scenes, seed=seed, results=results)
 
 
@@ -744,13 +754,16 @@ def run_clips(split: str, config: Config | None = None, workers: int | None = No
     length = LONG_CLIP_FRAMES if long else CLIP_FRAMES
     workers = _workers(workers)
     out: list[FrameResult] = []
+    order = drawing_order(clips, mirrored)
+    by_clip: dict[tuple[int, bool], list[FrameResult]] = {}
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = [(seed, i, config, 0.7, length, renderer, flip) for i in range(clips)
-                for flip in orientations(mirrored)]
+        jobs = [(seed, i, config, 0.7, length, renderer, flip) for i, flip in order]
         for k, frames in enumerate(pool.map(_clip_worker, jobs)):
-            out.extend(frames)
+            by_clip[order[k]] = frames
             if progress:
                 progress(k + 1, len(jobs))
+    for key in sorted(by_clip):
+        out.extend(by_clip[key])
     return out
 
 

@@ -251,6 +251,27 @@ def test_split_videos_run_one_process_a_camera_and_count_every_frame():
         d for d, _ in calls)
 
 
+def test_a_mirrored_parallel_run_draws_every_room_before_any_mirror_and_reports_in_order():
+    # Two workers given a room and its mirror side by side would path-trace one frame at
+    # once; the mirrors come after every room, and the report is in (room, mirror) order
+    # with the figures of a run in one process.
+    from sitl.evaluate import drawing_order, run_eval
+
+    order = drawing_order(3, True)
+    assert sorted(order) == [(i, flip) for i in range(3) for flip in (False, True)]
+    assert max(k for k, (_, flip) in enumerate(order) if not flip) < min(
+        k for k, (_, flip) in enumerate(order) if flip)
+    assert drawing_order(3, False) == [(0, False), (1, False), (2, False)]
+    # Each frame's own focal length estimate tells the frames apart.
+    view = View(320, 240, 90.0)
+    runs = [run_eval(3, 0, view=view, assume_focal=False, workers=workers,
+                     mirrored=True).results for workers in (2, 1)]
+    parallel, alone = ([(r.index, r.mirrored, r.eta_est_deg, r.focal_est_px) for r in rs]
+                       for rs in runs)
+    assert [k[:2] for k in parallel] == [(i, flip) for i in range(3) for flip in (False, True)]
+    assert parallel == alone and len({k[3] for k in parallel}) >= 3
+
+
 def test_a_pitched_view_is_the_same_room_seen_nose_down_and_its_box_is_found():
     # `companion eval --pitch 20`: room 82 of seed 0 seen by the camera pitched 20° further
     # nose down. V3 comes 20° nearer the optical axis, and the box, 32° off the room, is
