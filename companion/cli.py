@@ -21,7 +21,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from companion.capture import CaptureError, ImageFolder, open_recording
+from companion.capture import CaptureError, ImageFolder, is_camera, open_recording
 from companion.config import Config, ConfigError, load_config
 
 EXIT_USAGE = 2
@@ -208,6 +208,10 @@ def dry_run(args) -> int:
     from companion.report import DecisionLog, Summary, annotate, log_record
     from companion.vision.pipeline import Pipeline
 
+    if is_camera(args.video) and not Path(args.video).is_file() and not Path(args.video).is_dir():
+        raise UserError(f"{args.video} is a camera, not a recording: `companion run --source "
+                        f"{args.video}` runs on it (with offboard.enabled false, the default, "
+                        "it decides and commands nothing)")
     cfg = _config(args.config, args.focal_px)
     pipeline = Pipeline(cfg)
     video = open_recording(args.video)
@@ -636,7 +640,7 @@ def _main(argv: list[str] | None) -> int:
         if not args.dry_run:
             raise UserError(
                 "--video needs --dry-run: a recording cannot fly the vehicle "
-                "(live control will be `companion run`)"
+                "(live control is `companion run`)"
             )
         return dry_run(args)
     except (UserError, ConfigError, CaptureError) as e:

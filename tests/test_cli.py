@@ -139,6 +139,13 @@ def test_text_file_named_mp4(tmp_path):
     _assert_one_line_error(run("--video", p, "--dry-run"), "not a video OpenCV can decode")
 
 
+def test_a_camera_given_as_a_recording_points_to_the_service():
+    # A live camera has no end and no file: `companion run --source` reads it.
+    for camera in ("/dev/video0", "0"):
+        _assert_one_line_error(run("--video", camera, "--dry-run"),
+                               f"`companion run --source {camera}`")
+
+
 def test_empty_folder(tmp_path):
     _assert_one_line_error(run("--video", tmp_path, "--dry-run"), "no images in folder")
 
