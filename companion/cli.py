@@ -253,12 +253,13 @@ def dry_run(args) -> int:
             # The picture this frame's estimate is made in (lens undone, once it is known),
             # taken before the frame is processed: processing it may settle the lens.
             picture = pipeline.pinhole(frame.image) if writer is not None else None
+            learning_lens = pipeline.learning_lens
             t0 = time.perf_counter()
             est = pipeline(frame.image)
             _, cmd, history = decide_frame(est.eta_deg, est.eta_tracked_deg, cfg.policy,
                                            history, est.scene_understood, est.range_m)
             latency_ms = (time.perf_counter() - t0) * 1e3
-            summary.add(est, latency_ms)
+            summary.add(est, latency_ms, learning_lens)
             if log:
                 log.write(log_record(frame.index, frame.t_s, est, cmd, latency_ms, frame.source))
             if writer is not None:

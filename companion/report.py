@@ -108,10 +108,14 @@ class Summary:
 
     def __post_init__(self):
         self.latencies: list[float] = []
+        self.learning: list[bool] = []
 
-    def add(self, est: Estimate, latency_ms: float) -> None:
+    def add(self, est: Estimate, latency_ms: float, learning_lens: bool = False) -> None:
+        """One frame; ``learning_lens``: the frame also searched the lens
+        (:attr:`~companion.vision.pipeline.Pipeline.learning_lens` before it ran)."""
         self.frames += 1
         self.latencies.append(latency_ms)
+        self.learning.append(learning_lens)
         if est.eta_deg is not None:
             self.with_obstacle += 1
             self.eta_min = est.eta_deg if self.eta_min is None else min(self.eta_min, est.eta_deg)
@@ -121,10 +125,15 @@ class Summary:
         lat = np.array(self.latencies) if self.latencies else np.zeros(1)
         eta = f"{self.eta_min:+.1f}° … {self.eta_max:+.1f}°" if self.eta_min is not None else "none"
         fps = self.frames / wall_s if wall_s > 0 else 0.0
+        after = lat[~np.array(self.learning, bool)] if self.latencies else lat
+        # The first frames of a video also search the lens: they, not the steady state,
+        # make the p95 of a short recording.
+        steady = (f" ({np.percentile(after, 95):.1f} ms after the {len(lat) - len(after)} "
+                  "frames that learnt the lens)") if 0 < len(after) < len(lat) else ""
         out = [
             f"frames: {self.frames}   with obstacle: {self.with_obstacle}   η range: {eta}",
             f"latency: median {np.median(lat):.1f} ms, p95 {np.percentile(lat, 95):.1f} ms"
-            f"   throughput: {fps:.1f} fps",
+            f"{steady}   throughput: {fps:.1f} fps",
         ]
         return out
 

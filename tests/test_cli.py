@@ -60,6 +60,30 @@ def test_dry_run_writes_exact_log_records(sample_video, tmp_path):
     assert "Traceback" not in r.stderr
 
 
+def test_the_summary_gives_the_p95_after_the_frames_that_learnt_the_lens():
+    # A video's first frames also search the lens, at about three times the lines stage's
+    # cost; on a short recording they are its p95, so the steady one is told beside it.
+    from types import SimpleNamespace
+
+    from companion.config import CameraConfig, Config
+    from companion.report import Summary
+    from companion.vision.pipeline import Pipeline
+
+    assert Pipeline(Config()).learning_lens
+    assert not Pipeline(Config(camera=CameraConfig(focal_px=500.0, distortion=(0.0,))
+                               )).learning_lens
+    frame = SimpleNamespace(eta_deg=None)
+    summary = Summary()
+    for k in range(40):
+        summary.add(frame, 30.0 if k < 9 else 5.0, learning_lens=k < 9)
+    line = summary.lines(1.0)[1]
+    assert "p95 30.0 ms (5.0 ms after the 9 frames that learnt the lens)" in line, line
+    steady = Summary()
+    for k in range(40):
+        steady.add(frame, 5.0 + 0.1 * k)
+    assert "after the" not in steady.lines(1.0)[1]
+
+
 def test_focal_px_is_reported_and_used(sample_video, tmp_path):
     video, _ = sample_video
     log_a, log_b = tmp_path / "a.jsonl", tmp_path / "b.jsonl"

@@ -459,6 +459,13 @@ class Pipeline:
         lens = self._last_lens
         return pts if lens is None else distort_px(pts, width, height, *lens)
 
+    @property
+    def learning_lens(self) -> bool:
+        """Whether the next frame (of the size seen last) still adds to this video's lens
+        estimate: its lines stage then also searches the lens (``lens.radial_k``, about
+        three times the stage's cost), as on the first :data:`LENS_FRAMES` frames."""
+        return self.config.camera.distortion is None and not self.running_lens.settled
+
     def _learn_lens(self, segments: np.ndarray, w: int, h: int) -> None:
         """Add this frame's estimate to the video's lens, while it is being estimated: the
         lens was not given and has not settled. Segments as detected in the raw frame."""
