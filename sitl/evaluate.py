@@ -65,7 +65,8 @@ from sitl.scene import (
 
 __all__ = ["View", "SceneResult", "EvalReport", "evaluate_scene", "evaluate_video", "run_eval",
            "format_report", "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
-           "run_clips", "clip_figures", "format_clips", "drawing_order"]
+           "run_clips", "clip_figures", "format_clips", "drawing_order",
+           "in_item_order"]
 
 TARGETS = {
     "eta_err_median_deg": 1.5,
@@ -418,9 +419,15 @@ def drawing_order(count: int, mirrored: bool) -> list[tuple[int, bool]]:
     """The (item, mirrored) jobs of a parallel run over ``count`` scenes or clips: every
     item as drawn first, then (with ``mirrored``) every mirror. A mirror is its item's
     render flipped, so an item and its mirror side by side would have two workers path-trace
-    one frame at once; in this order the mirrors read the cache. Results are put back in
-    (item, mirrored) order (:func:`orientations`) by the caller."""
+    one frame at once; in this order the mirrors read the cache. :func:`in_item_order`
+    puts the results back."""
     return [(i, flip) for flip in orientations(mirrored) for i in range(count)]
+
+
+def in_item_order(order: list[tuple[int, bool]], results: list) -> list:
+    """``results``, one per job of ``order`` (:func:`drawing_order`) and in its order, put
+    in (item, mirrored) order: each item followed by its mirror (:func:`orientations`)."""
+    return [r for _, r in sorted(zip(order, results, strict=True), key=lambda pair: pair[0])]
 
 
 def run_eval(
@@ -457,8 +464,7 @@ def run_eval(
                 results.append(r)
                 if progress:
                     progress(len(results), total)
-    results = [r for _, r in sorted(zip(order, results, strict=True), key=lambda pair: pair[0])]
-    return EvalReport(scenes=scenes, seed=seed, results=results)
+    return EvalReport(scenes=scenes, seed=seed, results=in_item_order(order, results))
 
 
 def format_report(report: EvalReport) -> list[str]:
@@ -753,18 +759,15 @@ def run_clips(split: str, config: Config | None = None, workers: int | None = No
     seed, clips = (LONG_CLIPS if long else CLIPS)[(renderer, split)]
     length = LONG_CLIP_FRAMES if long else CLIP_FRAMES
     workers = _workers(workers)
-    out: list[FrameResult] = []
     order = drawing_order(clips, mirrored)
-    by_clip: dict[tuple[int, bool], list[FrameResult]] = {}
+    by_clip: list[list[FrameResult]] = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
         jobs = [(seed, i, config, 0.7, length, renderer, flip) for i, flip in order]
-        for k, frames in enumerate(pool.map(_clip_worker, jobs)):
-            by_clip[order[k]] = frames
+        for frames in pool.map(_clip_worker, jobs):
+            by_clip.append(frames)
             if progress:
-                progress(k + 1, len(jobs))
-    for key in sorted(by_clip):
-        out.extend(by_clip[key])
-    return out
+                progress(len(by_clip), len(jobs))
+    return [r for frames in in_item_order(order, by_clip) for r in frames]
 
 
 def late_frames(frames: list[FrameResult]) -> list[FrameResult]:
