@@ -469,11 +469,9 @@ class Pipeline:
     def _learn_lens(self, segments: np.ndarray, w: int, h: int) -> None:
         """Add this frame's estimate to the video's lens, while it is being estimated: the
         lens was not given and has not settled. Segments as detected in the raw frame."""
-        if self.config.camera.distortion is not None:
-            return
         if self._lens_size != (w, h):  # another camera
             self._lens_size, self.running_lens = (w, h), RunningLens()
-        if self.running_lens.settled:
+        if not self.learning_lens:
             return
         k = radial_k(segments, w, h, self.focal_for(w), self.config.vision.vanishing)
         if k is not None:
