@@ -182,8 +182,11 @@ def open_recording(path: str | Path) -> VideoFile | ImageFolder:
 
 
 def is_camera(spec: str | int) -> bool:
-    """A camera index (``0``) or device path (``/dev/video0``), not a recording."""
+    """A camera index (``0``) or device path (``/dev/video0``), not a recording: a file or
+    folder of that name (``/dev/shm/flight.mp4``) is a recording."""
     text = str(spec)
+    if Path(text).is_file() or Path(text).is_dir():
+        return False
     return text.isdigit() or text.startswith("/dev/")
 
 

@@ -208,7 +208,7 @@ def dry_run(args) -> int:
     from companion.report import DecisionLog, Summary, annotate, log_record
     from companion.vision.pipeline import Pipeline
 
-    if is_camera(args.video) and not Path(args.video).is_file() and not Path(args.video).is_dir():
+    if is_camera(args.video):
         raise UserError(f"{args.video} is a camera, not a recording: `companion run --source "
                         f"{args.video}` runs on it (with offboard.enabled false, the default, "
                         "it decides and commands nothing)")

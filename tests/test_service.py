@@ -19,7 +19,14 @@ import numpy as np
 import pytest
 from helpers.processes import free_udp_port, stop_with_sigterm
 
-from companion.capture import CaptureError, ImageFolder, LatestFrame, VideoFile, open_source
+from companion.capture import (
+    CaptureError,
+    ImageFolder,
+    LatestFrame,
+    VideoFile,
+    is_camera,
+    open_source,
+)
 from companion.config import Config
 from companion.control.offboard import OffboardController
 from companion.notify import notify
@@ -131,6 +138,16 @@ def test_image_folder_in_name_order_skipping_other_files(tmp_path, caplog):
 def test_file_source_reads_every_frame_and_ends():
     with VideoFile(SAMPLE) as video:
         assert sum(1 for _ in video) == 50
+
+
+def test_a_camera_is_an_index_or_a_device_and_a_file_of_that_name_a_recording(tmp_path,
+                                                                              monkeypatch):
+    assert is_camera("/dev/video0") and is_camera("0") and is_camera(2)
+    assert not is_camera("flight.mp4")
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "0").write_bytes(b"")
+    (tmp_path / "1").mkdir()
+    assert not is_camera("0") and not is_camera("1") and is_camera("2")
 
 
 def test_a_slow_consumer_sees_the_newest_frame_not_a_backlog(tmp_path):
