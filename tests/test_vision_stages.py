@@ -516,6 +516,34 @@ def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 1e-6
 
 
+def test_a_right_angle_that_a_pixel_of_noise_decides_is_no_box():
+    # The corner of the test above with legs of 45 and 35 px, and the same with legs of
+    # 12 and 10 px: exact both times, so both cross the horizon at a right angle. But one
+    # pixel at an end of the short legs moves that angle by more than
+    # single_corner_noise_deg, so chance passes the test as readily (an aligned table's
+    # short top edges, a shadow's): only the long legs make a box.
+    from companion.vision.obstacles import ObstacleParams, find_obstacles
+
+    a = np.radians(35.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.2, 1.2, 4.0])
+    top = front + [0.0, -0.5, 0.0]
+
+    def found(leg_m, noise_deg=None):
+        params = ObstacleParams() if noise_deg is None else ObstacleParams(
+            single_corner_noise_deg=noise_deg)
+        b, t, t_u, t_v = _project([front, top, top + leg_m * u, top + leg_m * v])
+        segs = np.array([[*t, *t_u], [*t, *t_v], [*b, *t]])
+        labels = np.array([NONE, NONE, V3])
+        corners = find_corners(segs, labels)
+        assert len(corners) == 1
+        return find_obstacles(segs, corners, _room_layout(), labels == NONE, labels, params)
+
+    assert len(found(0.8)) == 1
+    assert found(0.2) == []
+    assert len(found(0.2, noise_deg=90.0)) == 1  # the right angle itself holds
+
+
 def test_a_piece_of_the_vertical_edge_is_no_leg_of_its_far_corner():
     # A box's top corner a little below eye level, one face seen nearly square, the
     # vertical edge down to the floor. The lowest piece of that edge leans a few degrees,

@@ -4,12 +4,13 @@ the steps described there."""
 
 import numpy as np
 
-from libc.math cimport fabs, sin
+from libc.math cimport asin, fabs, sin, sqrt
 from libc.stdlib cimport free, malloc, realloc
 
 from companion.vision._geometry cimport (
     angle_between_deg,
     cross3,
+    degrees,
     dot3,
     end_distance,
     endpoint_weight,
@@ -33,6 +34,7 @@ cdef struct Params:
     double horizon_tol_deg
     double orthogonal_tol_deg
     double single_corner_orthogonal_tol_deg
+    double single_corner_noise_deg
     double single_face_tol_deg
     double non_manhattan_min_deg
     double merge_deg
@@ -201,12 +203,60 @@ cdef inline void set_ovps(Hypothesis* h, const double* d1, const double* d2, dou
     h.edge = edge
 
 
-cdef bint horizon_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t a, Py_ssize_t b,
-                       double* d1, double* d2, double* ortho) noexcept nogil:
+cdef inline double right_angle_departure_deg(Frame* fr, double x1, double y1, double x2,
+                                             double y2, const double* other) noexcept nogil:
+    """Where the segment (x1, y1)–(x2, y2) crosses the horizon, as a direction: its signed
+    departure from a right angle to ``other``, degrees (90 when it never crosses)."""
+    cdef double line[3]
+    cdef double o[3]
+    cdef double d[3]
+    cdef double c
+    segment_line(x1, y1, x2, y2, line)
+    if not intersect(line, fr.horizon, o):
+        return 90.0
+    direction_of(fr, o, d)
+    c = dot3(d, other)
+    return degrees(asin(-1.0 if c < -1.0 else (1.0 if c > 1.0 else c)))
+
+
+cdef double right_angle_noise_deg(Frame* fr, Params* p, double[:, ::1] s, Py_ssize_t a,
+                                  Py_ssize_t b, const double* d1,
+                                  const double* d2) noexcept nogil:
+    """How far ``noise_px`` at one end of leg ``a`` or ``b`` (across the leg) moves the
+    right angle between their horizon crossings ``d1``, ``d2``: the root sum of squares over
+    the four ends, degrees (first order, by finite differences). A leg nearly along the
+    horizon crosses it far away, where a pixel moves the crossing by degrees."""
+    cdef double var = 0.0, e, nx, ny, ln
+    cdef double q[4]
+    cdef const double* other
+    cdef Py_ssize_t leg, end, k
+    for leg in range(2):
+        k, other = (a, d2) if leg == 0 else (b, d1)
+        nx, ny = s[k, 1] - s[k, 3], s[k, 2] - s[k, 0]
+        ln = hypot(nx, ny)
+        if ln <= 0:
+            return INF
+        nx, ny = nx / ln * p.noise_px, ny / ln * p.noise_px
+        for end in range(2):
+            q[0], q[1], q[2], q[3] = s[k, 0], s[k, 1], s[k, 2], s[k, 3]
+            q[2 * end] += nx
+            q[2 * end + 1] += ny
+            e = (right_angle_departure_deg(fr, q[0], q[1], q[2], q[3], other)
+                 - right_angle_departure_deg(fr, s[k, 0], s[k, 1], s[k, 2], s[k, 3], other))
+            var += e * e
+    return sqrt(var)
+
+
+cdef bint horizon_ovps(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
+                       Py_ssize_t a, Py_ssize_t b, double* d1, double* d2,
+                       double* ortho) noexcept nogil:
     """OVPs where legs ``a`` and ``b`` cross the horizon, for a corner whose other end
     shows no leg: the horizon test then holds by construction, so only the tight
     ``single_corner_orthogonal_tol_deg`` and the distance from V1, V2 separate a box from
-    chance."""
+    chance. The right angle counts only where the legs' pixel noise could fail it: where
+    ``noise_px`` at the legs' ends moves it by more than ``single_corner_noise_deg``
+    (:func:`right_angle_noise_deg`), chance passes the test as readily as a box does
+    (short legs, or one nearly along the horizon)."""
     cdef double o1[3]
     cdef double o2[3]
     cdef double hor
@@ -216,7 +266,8 @@ cdef bint horizon_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t a,
     direction_of(fr, o2, d2)
     ovp_error(fr, d1, d2, &hor, ortho)
     return (ok1 and ok2 and ortho[0] <= p.single_corner_orthogonal_tol_deg
-            and off_layout(fr, p, d1) and off_layout(fr, p, d2))
+            and off_layout(fr, p, d1) and off_layout(fr, p, d2)
+            and right_angle_noise_deg(fr, p, s, a, b, d1, d2) <= p.single_corner_noise_deg)
 
 
 cdef void far_ends(double[:, ::1] s, double[:, ::1] lines, double[:, ::1] pc,
@@ -647,7 +698,7 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] s, double[::1]
             for kb, _ in legs_b:
                 if ka == kb:
                     continue
-                if not horizon_ovps(fr, p, lines, ka, kb, d1, d2, &ortho) or ortho >= best:
+                if not horizon_ovps(fr, p, s, lines, ka, kb, d1, d2, &ortho) or ortho >= best:
                     continue
                 pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
                 pixel_point(fr.f, fr.cx, fr.cy, d2, o2)
@@ -705,7 +756,7 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
             for leg, _ in legs:
                 attached.setdefault(leg, []).append((chain, end))
     for x, y, a, b in junctions:
-        if not horizon_ovps(fr, p, lines, a, b, d1, d2, &ortho):
+        if not horizon_ovps(fr, p, s, lines, a, b, d1, d2, &ortho):
             continue
         # A leg seen edge-on runs along the junction's own line through V3, where the
         # unseen vertical edge would be: a line on the floor aimed at the camera's foot
@@ -1332,6 +1383,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.horizon_tol_deg = params.horizon_tol_deg
     p.orthogonal_tol_deg = params.orthogonal_tol_deg
     p.single_corner_orthogonal_tol_deg = params.single_corner_orthogonal_tol_deg
+    p.single_corner_noise_deg = params.single_corner_noise_deg
     p.single_face_tol_deg = params.single_face_tol_deg
     p.non_manhattan_min_deg = params.non_manhattan_min_deg
     p.merge_deg = params.merge_deg
@@ -1416,7 +1468,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 # the frame, the room's edges that the box hides end too: no proof there.
                 if not partner_ovps(&fr, &p, lines, cs[g], cn[g], partners, nh, d1, d2, &lam3):
                     if reach[g] < 2 * p.min_edge_px or not horizon_ovps(
-                            &fr, &p, lines, cs[g], cn[g], d1, d2, &lam3):
+                            &fr, &p, s, lines, cs[g], cn[g], d1, d2, &lam3):
                         continue
                     pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
                     pixel_point(fr.f, fr.cx, fr.cy, d2, o2)

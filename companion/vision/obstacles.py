@@ -52,6 +52,11 @@ class ObstacleParams:
     orthogonal_tol_deg: float = field(default=20.0, metadata={"range": (0.1, 45.0)})
     """λ3: O1 ⟂ O2 within this (focal length is a guess); a divisor of λ3"""
     single_corner_orthogonal_tol_deg: float = 8.0  # the same when C_h shows no leg
+    single_corner_noise_deg: float = field(default=16.0, metadata={"range": (0.1, 180.0)})
+    """... and that test counts only where ``noise_px`` across the legs' ends (each end
+    alone, root sum of squares) moves the right angle by at most this: else noise alone
+    decides it (short legs, or one nearly along the horizon, as an aligned table's or a
+    shadow's), and chance passes it as readily as a box does"""
     single_face_tol_deg: float = 3.0  # when one face is all there is of a box: its OVP this
     # close to horizontal, and the room's V1 ⟂ V2 this close (its other OVP is at a right
     # angle through the focal length)
@@ -109,7 +114,9 @@ def find_obstacles(
     is the paper's pair; a leg of ``C_h`` that the line detector missed (a thin top face,
     low contrast against the wall) is replaced by the horizon: ``O = L^g ∩ horizon``.
     At least one OVP must come from two real edges (``L^g × L^h``), and λ3 (eq. 8) holds.
-    With no leg of ``C_h`` at all, both OVPs are where ``C_g``'s legs cross the horizon,
+    With no leg of ``C_h`` at all, both OVPs are where ``C_g``'s legs cross the horizon
+    (at a right angle that the legs' pixel noise alone could not make or break:
+    ``single_corner_noise_deg``; the same for the later rules that take OVPs there),
     unless a room edge leaves the vertical edge's far end inside the frame (a door frame or
     an aligned box, with a rug's or a shadow's corner at its foot), or, with ``C_g`` at
     the edge's foot, its near end where that stops more than ``radius_px`` above ``C_g``
