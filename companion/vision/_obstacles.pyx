@@ -227,6 +227,9 @@ cdef double right_angle_noise_deg(Frame* fr, Params* p, double[:, ::1] s, Py_ssi
     the four ends, degrees (first order, by finite differences). A leg nearly along the
     horizon crosses it far away, where a pixel moves the crossing by degrees."""
     cdef double var = 0.0, e, nx, ny, ln
+    cdef double c = dot3(d1, d2)
+    # The departure of the legs as they are, the same for either leg.
+    cdef double base = degrees(asin(-1.0 if c < -1.0 else (1.0 if c > 1.0 else c)))
     cdef double q[4]
     cdef const double* other
     cdef Py_ssize_t leg, end, k
@@ -241,8 +244,7 @@ cdef double right_angle_noise_deg(Frame* fr, Params* p, double[:, ::1] s, Py_ssi
             q[0], q[1], q[2], q[3] = s[k, 0], s[k, 1], s[k, 2], s[k, 3]
             q[2 * end] += nx
             q[2 * end + 1] += ny
-            e = (right_angle_departure_deg(fr, q[0], q[1], q[2], q[3], other)
-                 - right_angle_departure_deg(fr, s[k, 0], s[k, 1], s[k, 2], s[k, 3], other))
+            e = right_angle_departure_deg(fr, q[0], q[1], q[2], q[3], other) - base
             var += e * e
     return sqrt(var)
 
