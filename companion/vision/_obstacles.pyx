@@ -593,8 +593,25 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] 
                 h.npoints = 2
 
 
+cdef inline bint share_a_leg(Hypothesis* a, Hypothesis* b) noexcept nogil:
+    """Whether two hypotheses rest on one segment between them."""
+    cdef int i, j
+    for i in range(a.nlegs):
+        for j in range(b.nlegs):
+            if a.legs[i] == b.legs[j]:
+                return True
+    return False
+
+
 cdef void pair_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* found) except *:
-    """Two silhouette OVPs at a right angle (λ3, eq. 8) make an obstacle hypothesis."""
+    """Two silhouette OVPs at a right angle (λ3, eq. 8) make an obstacle hypothesis, unless
+    the two halves share a leg.
+
+    One edge bounds one face: a leg in both halves would point at both OVPs, which only an
+    edge along the horizon does (seen edge-on, from its own height). Such a leg meets every
+    line on the horizon, so both halves passed the horizon test whatever their other legs
+    were: a table's top seen at eye level, its front edge spanning two of its legs, with a
+    shadow's or a floor line's edge at each foot."""
     cdef Py_ssize_t i, j, k
     cdef double lam
     cdef Hypothesis* a
@@ -603,6 +620,8 @@ cdef void pair_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* foun
     for i in range(halves.count):
         for j in range(i + 1, halves.count):
             a, b = &halves.items[i], &halves.items[j]
+            if share_a_leg(a, b):
+                continue
             # Each half is on the horizon and off V1, V2 already; eq. 8 adds the right angle.
             if not box_ovps(fr, p, a.d1, b.d1, &lam):
                 continue
@@ -633,7 +652,8 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
     angle is taken through the focal length, so the room's V1 and V2 must be at one within
     the same tolerance (a wrong focal length shows there). A face has two outline edges, so
     three or more halves on one OVP are no face: a striped rug, whose stripes can pass for
-    verticals, also has two parallel edges."""
+    verticals, also has two parallel edges; nor is a half that shares a leg with a half on
+    another OVP (:func:`pair_halves`)."""
     cdef Py_ssize_t i, j, k, agree
     cdef bint ambiguous
     cdef double d2[3]
@@ -648,13 +668,14 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
         # A face shows at most its two outline edges, each with one edge of the face at
         # either end: more halves on one OVP are repeated structure (the stripes of a rug
         # meeting its two edges), and halves of one vertical edge that disagree are legs
-        # of more than one thing meeting there. Neither is a box.
+        # of more than one thing meeting there. Neither is a box. Nor is a half that shares
+        # a leg with a half on another OVP: that leg lies along the horizon (pair_halves).
         agree = 0
         ambiguous = False
         for j in range(halves.count):
             if angle_between_deg(a.d1, halves.items[j].d1) <= p.merge_deg:
                 agree += 1
-            elif same_edge(a, &halves.items[j]):
+            elif same_edge(a, &halves.items[j]) or share_a_leg(a, &halves.items[j]):
                 ambiguous = True
         if agree > 2 or ambiguous:
             continue
