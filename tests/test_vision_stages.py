@@ -1043,15 +1043,15 @@ def test_legs_of_two_things_at_one_vertical_edge_make_no_single_face():
                               labels[:4] == NONE, labels[:4])) == 1
 
 
-def _table_at_eye_level(yaw_deg=25.0, shadow_yaw_deg=40.0):
+def _table_at_eye_level(apart_deg, yaw_deg=25.0, shadow_yaw_deg=40.0):
     """A table 3 m ahead, ``yaw_deg`` off the view, its top at the height of a level
     camera, seen with its two front legs (1 m apart) and the top's front edge between
     them: along the horizon, one segment. At each foot a shadow's edge leaves toward the
-    other leg, the two shadows at a right angle on the floor, ``shadow_yaw_deg`` and 90°
-    more off the view. Returns the segments: legs, top edge, shadows."""
-    a, b = np.radians(yaw_deg), np.radians(shadow_yaw_deg)
+    other leg, ``shadow_yaw_deg`` and that plus ``apart_deg`` off the view on the floor.
+    Returns the segments: legs, top edge, shadows."""
+    a, b, c = np.radians([yaw_deg, shadow_yaw_deg, shadow_yaw_deg + apart_deg])
     u = np.array([np.cos(a), 0.0, np.sin(a)])
-    w1, w2 = np.array([np.cos(b), 0.0, np.sin(b)]), np.array([-np.sin(b), 0.0, np.cos(b)])
+    w1, w2 = np.array([np.cos(b), 0.0, np.sin(b)]), np.array([np.cos(c), 0.0, np.sin(c)])
     top1 = np.array([-0.5, 0.0, 3.0])
     top2, drop = top1 + u, np.array([0.0, 1.2, 0.0])
     t1, t2, f1, f2, e1, e2 = _project([top1, top2, top1 + drop, top2 + drop,
@@ -1063,16 +1063,23 @@ def _table_at_eye_level(yaw_deg=25.0, shadow_yaw_deg=40.0):
 def test_an_edge_along_the_horizon_bounds_no_face(v2_skew_deg):
     # Each leg has the top's edge at its top and a shadow's at its foot, on one side: a
     # silhouette half, whose horizon test the top's edge passes for any shadow, lying on
-    # the horizon itself. The shadows at a right angle, the two halves would be a box; one
-    # segment in both would point at both of its OVPs. Skewed 5°, the room does not vouch
-    # for the focal length and the halves could only pair; square, each could be a face.
+    # the horizon itself. One segment in both halves would point at both OVPs of a box, so
+    # the OVPs are only where the shadows cross the horizon, and are held to a single
+    # corner's right angle (8°); 15° off it, as chance leaves them here, they are no box,
+    # which the halves' own test (20°) passed. Skewed 5°, the room does not vouch for the
+    # focal length and the halves could only pair; square, each could be a face alone.
     from companion.vision.obstacles import find_obstacles
 
-    segs = _table_at_eye_level()
-    assert np.allclose(segs[2, [1, 3]], C[1])  # the top's edge is the horizon
+    layout = _room_layout(v2_skew_deg=v2_skew_deg)
     labels = np.array([V3, V3, NONE, NONE, NONE])
-    assert find_obstacles(segs, find_corners(segs, labels), _room_layout(v2_skew_deg=v2_skew_deg),
-                          labels == NONE, labels) == []
+    segs = _table_at_eye_level(105.0)
+    assert np.allclose(segs[2, [1, 3]], C[1])  # the top's edge is the horizon
+    assert find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE,
+                          labels) == []
+    # At a right angle, as the bottom edges of a box whose top is at eye level, they are.
+    segs = _table_at_eye_level(90.0)
+    assert len(find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE,
+                              labels)) == 1
 
 
 def test_the_stripes_of_a_rug_are_no_face():

@@ -593,40 +593,52 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] 
                 h.npoints = 2
 
 
-cdef inline bint share_a_leg(Hypothesis* a, Hypothesis* b) noexcept nogil:
-    """Whether two hypotheses rest on one segment between them."""
+cdef inline Py_ssize_t shared_leg(Hypothesis* a, Hypothesis* b) noexcept nogil:
+    """The segment two silhouette halves both rest on, else −1."""
     cdef int i, j
     for i in range(a.nlegs):
         for j in range(b.nlegs):
             if a.legs[i] == b.legs[j]:
-                return True
-    return False
+                return a.legs[i]
+    return -1
 
 
-cdef void pair_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* found) except *:
-    """Two silhouette OVPs at a right angle (λ3, eq. 8) make an obstacle hypothesis, unless
-    the two halves share a leg.
+cdef void pair_halves(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
+                      Hypotheses* halves, Hypotheses* found) except *:
+    """Two silhouette OVPs at a right angle (λ3, eq. 8) make an obstacle hypothesis.
 
-    One edge bounds one face: a leg in both halves would point at both OVPs, which only an
-    edge along the horizon does (seen edge-on, from its own height). Such a leg meets every
-    line on the horizon, so both halves passed the horizon test whatever their other legs
-    were: a table's top seen at eye level, its front edge spanning two of its legs, with a
-    shadow's or a floor line's edge at each foot."""
-    cdef Py_ssize_t i, j, k
+    One edge bounds one face: a leg in both halves points at both OVPs, which only an edge
+    along the horizon does (seen edge-on, from its own height). Such a leg meets every line
+    on the horizon, so both halves passed the horizon test whatever their other legs were
+    (a table's top seen at eye level, its front edge spanning two of its legs, with a
+    shadow or a floor line at each foot). The OVPs are then where those two other legs
+    cross the horizon, and they are held to a single corner's right-angle test
+    (:func:`horizon_ovps`), as a box's bottom edges under a top at eye level pass it."""
+    cdef Py_ssize_t i, j, k, shared, ka, kb
     cdef double lam
+    cdef double d1[3]
+    cdef double d2[3]
     cdef Hypothesis* a
     cdef Hypothesis* b
     cdef Hypothesis* h
     for i in range(halves.count):
         for j in range(i + 1, halves.count):
             a, b = &halves.items[i], &halves.items[j]
-            if share_a_leg(a, b):
-                continue
-            # Each half is on the horizon and off V1, V2 already; eq. 8 adds the right angle.
-            if not box_ovps(fr, p, a.d1, b.d1, &lam):
-                continue
+            shared = shared_leg(a, b)
+            if shared >= 0:
+                ka = a.legs[1] if a.legs[0] == shared else a.legs[0]
+                kb = b.legs[1] if b.legs[0] == shared else b.legs[0]
+                if ka == kb or not horizon_ovps(fr, p, s, lines, ka, kb, d1, d2, &lam):
+                    continue
+            else:
+                # Each half is on the horizon and off V1, V2 already; eq. 8 adds the
+                # right angle.
+                if not box_ovps(fr, p, a.d1, b.d1, &lam):
+                    continue
+                for k in range(3):
+                    d1[k], d2[k] = a.d1[k], b.d1[k]
             h = new_hypothesis(found)
-            set_ovps(h, a.d1, b.d1, lam, a.edge if a.edge > b.edge else b.edge)
+            set_ovps(h, d1, d2, lam, a.edge if a.edge > b.edge else b.edge)
             h.nlegs = 4
             h.legs[0], h.legs[1], h.legs[2], h.legs[3] = a.legs[0], a.legs[1], b.legs[0], b.legs[1]
             h.npoints = 4
@@ -669,13 +681,14 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
         # either end: more halves on one OVP are repeated structure (the stripes of a rug
         # meeting its two edges), and halves of one vertical edge that disagree are legs
         # of more than one thing meeting there. Neither is a box. Nor is a half that shares
-        # a leg with a half on another OVP: that leg lies along the horizon (pair_halves).
+        # a leg with a half on another OVP: that leg lies along the horizon (pair_halves),
+        # and with no second face there is no right angle to test instead.
         agree = 0
         ambiguous = False
         for j in range(halves.count):
             if angle_between_deg(a.d1, halves.items[j].d1) <= p.merge_deg:
                 agree += 1
-            elif same_edge(a, &halves.items[j]) or share_a_leg(a, &halves.items[j]):
+            elif same_edge(a, &halves.items[j]) or shared_leg(a, &halves.items[j]) >= 0:
                 ambiguous = True
         if agree > 2 or ambiguous:
             continue
@@ -1514,7 +1527,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         chains = vertical_chains(s, lengths, lines, verticals, &p)
         edges = edge_legs(s, lengths, chains, free_idx, &p)
         silhouette_halves(&fr, &p, s, lengths, lines, edges, manhattan_idx, &halves)
-        pair_halves(&fr, &p, &halves, &found)
+        pair_halves(&fr, &p, s, lines, &halves, &found)
         # Step 0 is the above; then, while nothing is found, the fallbacks in turn.
         for step in range(5):
             if step == 1:
