@@ -203,6 +203,12 @@ cdef inline void set_ovps(Hypothesis* h, const double* d1, const double* d2, dou
     h.edge = edge
 
 
+cdef inline double signed_departure_deg(const double* a, const double* b) noexcept nogil:
+    """Signed departure of unit directions ``a`` and ``b`` from a right angle, degrees."""
+    cdef double c = dot3(a, b)
+    return degrees(asin(-1.0 if c < -1.0 else (1.0 if c > 1.0 else c)))
+
+
 cdef inline double right_angle_departure_deg(Frame* fr, double x1, double y1, double x2,
                                              double y2, const double* other) noexcept nogil:
     """Where the segment (x1, y1)–(x2, y2) crosses the horizon, as a direction: its signed
@@ -210,13 +216,11 @@ cdef inline double right_angle_departure_deg(Frame* fr, double x1, double y1, do
     cdef double line[3]
     cdef double o[3]
     cdef double d[3]
-    cdef double c
     segment_line(x1, y1, x2, y2, line)
     if not intersect(line, fr.horizon, o):
         return 90.0
     direction_of(fr, o, d)
-    c = dot3(d, other)
-    return degrees(asin(-1.0 if c < -1.0 else (1.0 if c > 1.0 else c)))
+    return signed_departure_deg(d, other)
 
 
 cdef double right_angle_noise_deg(Frame* fr, Params* p, double[:, ::1] s, Py_ssize_t a,
@@ -227,9 +231,8 @@ cdef double right_angle_noise_deg(Frame* fr, Params* p, double[:, ::1] s, Py_ssi
     the four ends, degrees (first order, by finite differences). A leg nearly along the
     horizon crosses it far away, where a pixel moves the crossing by degrees."""
     cdef double var = 0.0, e, nx, ny, ln
-    cdef double c = dot3(d1, d2)
     # The departure of the legs as they are, the same for either leg.
-    cdef double base = degrees(asin(-1.0 if c < -1.0 else (1.0 if c > 1.0 else c)))
+    cdef double base = signed_departure_deg(d1, d2)
     cdef double q[4]
     cdef const double* other
     cdef Py_ssize_t leg, end, k
