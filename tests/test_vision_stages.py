@@ -1060,7 +1060,7 @@ def _table_at_eye_level(apart_deg, yaw_deg=25.0, shadow_yaw_deg=40.0):
 
 
 @pytest.mark.parametrize("v2_skew_deg", [0.0, 5.0])
-def test_an_edge_along_the_horizon_bounds_no_face(v2_skew_deg):
+def test_halves_sharing_an_edge_along_the_horizon_need_a_single_corners_right_angle(v2_skew_deg):
     # Each leg has the top's edge at its top and a shadow's at its foot, on one side: a
     # silhouette half, whose horizon test the top's edge passes for any shadow, lying on
     # the horizon itself. One segment in both halves would point at both OVPs of a box, so
