@@ -109,15 +109,6 @@ def test_with_a_known_focal_length_v2_must_be_nearly_orthogonal_to_v1():
         assert holds(layout, v1) and holds(layout, v2)
         assert not holds(layout, off)
 
-    # A video whose focal length has settled at F holds its frames to the same right angle.
-    from companion.vision.pipeline import FOCAL_WARMUP, Pipeline, RunningFocal
-
-    pipe = Pipeline()
-    pipe._focal_size, pipe.running_focal = (W, H), RunningFocal((F,) * FOCAL_WARMUP)
-    layout, source = pipe._layout(without_v2, W, H)
-    settled = direction_of(layout.vps[[V1, V2]], F, C)
-    assert source == "estimated" and not (holds(settled, off) and holds(settled, v1))
-
 
 def _room_with_v2(rng, v2_off_deg, n2, length2, noise_px):
     """A level room (V1 right of centre, V3 at infinity) whose V2 family, ``n2`` segments

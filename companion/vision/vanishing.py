@@ -84,14 +84,14 @@ class VPParams:
     orthogonal_tol_deg: float = field(default=20.0, metadata={"range": (0.0, 45.0)})
     """V1 ⟂ V2 within this when the focal length is a guess"""
     known_focal_orthogonal_tol_deg: float = field(default=10.0, metadata={"range": (0.0, 45.0)})
-    """... and when it is given, or a video's running estimate has settled"""
+    """... and when it is given"""
     min_vp_separation_deg: float = field(default=3.0, metadata={"range": (0.0, 45.0)})
     """peaks closer than this are one VP"""
     orthogonal_sigma_deg: float = field(default=0.0, metadata={"range": (0.0, 45.0)})
     """the final refit's prior that the layout VPs are orthogonal, to within this (0: none,
     as when the focal length is a guess)"""
     known_focal_orthogonal_sigma_deg: float = field(default=1.0, metadata={"range": (0.0, 45.0)})
-    """... and when it is given, or a video's running estimate has settled"""
+    """... and when it is given"""
 
 
 @dataclass(frozen=True)
