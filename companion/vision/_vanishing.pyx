@@ -347,10 +347,8 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     do not pass for the vertical when the horizontal structure says otherwise. The
     winner's V1 × V2 is completed as one more V3 hypothesis.
 
-    Returns ``(vps 3×3, observed (v1, v2, v3), supports 3, others K×3, others_support K,
-    fitted 3×3)``: rows V1 (LMVP), V2, V3 and the further horizontal VPs as unit
-    homogeneous pixel points; ``fitted`` the layout VPs as their own segments alone fit
-    them, before the orthogonality prior (``vps`` itself without one).
+    Returns ``(vps 3×3, observed (v1, v2, v3), supports 3, others K×3, others_support K)``:
+    rows V1 (LMVP), V2, V3 and the further horizontal VPs as unit homogeneous pixel points.
     """
     cdef Params p = _params(params)
     cdef double[:, ::1] s = np.ascontiguousarray(segments_px, dtype=float).reshape(-1, 4)
@@ -427,16 +425,13 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
                     best = frame
     _, dirs, observed, supports, other_dirs, other_support = best
     cdef double[:, ::1] d = dirs
-    fitted = np.empty((3, 3))
-    cdef double[:, ::1] fd = fitted
-    polish(ns, lines, focal, &p, d, observed, other_dirs, fd)
+    polish(ns, lines, focal, &p, d, observed, other_dirs)
     for i in range(3):
         pixel_point(focal, cx, cy, &d[i, 0], &d[i, 0])
-        pixel_point(focal, cx, cy, &fd[i, 0], &fd[i, 0])
     cdef double[:, ::1] o = other_dirs
     for i in range(o.shape[0]):
         pixel_point(focal, cx, cy, &o[i, 0], &o[i, 0])
-    return dirs, observed, supports, other_dirs, other_support, fitted
+    return dirs, observed, supports, other_dirs, other_support
 
 
 cdef inline bint inferred_v2(const double* v3, const double* v1, double* out) noexcept nogil:
@@ -451,11 +446,9 @@ cdef inline bint inferred_v2(const double* v3, const double* v1, double* out) no
 
 
 cdef void polish(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* p,
-                 double[:, ::1] d, tuple observed, double[:, ::1] others,
-                 double[:, ::1] fitted):
+                 double[:, ::1] d, tuple observed, double[:, ::1] others):
     """Refit each observed layout VP (rows of ``d``: V1, V2, V3) on the segments that
-    point at it better than at any other VP found (layout or obstacle), in place; the
-    refit before the prior goes to ``fitted`` (3×3).
+    point at it better than at any other VP found (layout or obstacle), in place.
 
     The earlier fits share segments: every segment within the thresholds of a VP weighs
     on it, so a nearby family of parallel edges (a road beside a building, a rotated
@@ -487,7 +480,6 @@ cdef void polish(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* 
             continue
         for j in range(2):
             refine(ns, lines, &own[k, 0], focal, p, &d[k, 0])
-    fitted[:, :] = d
     if p.orthogonal_sigma_deg > 0:
         orthogonal_prior(ns, lines, own, focal, p, d, observed, p.orthogonal_sigma_deg)
     for k in range(3):

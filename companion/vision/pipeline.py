@@ -195,14 +195,10 @@ def _support(layout: LayoutVPs) -> float:
 
 
 def _orthogonal_focal(layout: LayoutVPs, centre: np.ndarray) -> float | None:
-    """The focal length that makes the observed V1 and V2 orthogonal, None without both.
-
-    From the VPs as their segments fit them: a fit leant to a right angle under one focal
-    length (the orthogonality prior) would vote for that focal length."""
+    """The focal length that makes the observed V1 and V2 orthogonal, None without both."""
     if not (layout.observed[V1] and layout.observed[V2]):
         return None
-    vps = layout.vps if layout.fitted_vps is None else layout.fitted_vps
-    return focal_from_orthogonal_vps(vps[V1], vps[V2], centre)
+    return focal_from_orthogonal_vps(layout.vps[V1], layout.vps[V2], centre)
 
 
 def _plausible(focal_px: float | None, width: int) -> bool:
@@ -326,18 +322,14 @@ class Pipeline:
         """Layout VPs, and where the focal length they rest on came from.
 
         ``given``: configured. With a given focal length V1 ⟂ V2 is checked with the
-        tighter ``known_focal_orthogonal_tol_deg`` and the final fit leans on the right
-        angle (``known_focal_orthogonal_sigma_deg``).
+        tighter ``known_focal_orthogonal_tol_deg``.
 
         Otherwise self-calibration: V1 and V2 are orthogonal in space, so when both are
         finite they fix ``f`` (:func:`focal_from_orthogonal_vps`), and each frame's
         estimate joins the video's :class:`RunningFocal`. Until that has settled, each
         frame calibrates itself (:meth:`_calibrate`). Once it has, a frame is searched with
-        the running estimate alone (``estimated``), as with a given focal length, both
-        tolerances included: one VP search per frame instead of several, and a VP that
-        few segments fix held near the right angle that the video's focal length gives.
-        The frame's vote is the focal length of its VPs as fitted before that lean
-        (:func:`_orthogonal_focal`), or the running estimate would confirm itself.
+        the running estimate alone (``estimated``): one VP search per frame instead of
+        several.
 
         A settled video's frame whose VPs under the running estimate imply another focal
         length (beyond ``SETTLED_TOL``), or show no V1–V2 pair, still calibrates itself
@@ -347,6 +339,7 @@ class Pipeline:
         twice the true focal length, and the median of the video's frames is the better
         evidence.
         """
+        vp = self.config.vision.vanishing
         if self.config.camera.focal_px:
             return detect_layout_vps(segments, w, h, self.config.camera.focal_px,
                                      self._known_focal_vp), "given"
@@ -360,10 +353,8 @@ class Pipeline:
                 self.running_focal = self.running_focal.add(layout.focal_px)
             return layout, source
 
-        # A settled estimate is held to what a given focal length is: V1 ⟂ V2 within the
-        # tighter tolerance, and the orthogonality prior steadies a VP few segments fix.
         f_run = self.running_focal.focal_px
-        layout = detect_layout_vps(segments, w, h, f_run, self._known_focal_vp)
+        layout = detect_layout_vps(segments, w, h, f_run, vp)
         f = _orthogonal_focal(layout, principal_point(w, h))
         if _plausible(f, w) and abs(f - f_run) <= SETTLED_TOL * f_run:
             self.running_focal = self.running_focal.add(f)

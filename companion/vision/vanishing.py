@@ -84,14 +84,14 @@ class VPParams:
     orthogonal_tol_deg: float = field(default=20.0, metadata={"range": (0.0, 45.0)})
     """V1 ⟂ V2 within this when the focal length is a guess"""
     known_focal_orthogonal_tol_deg: float = field(default=10.0, metadata={"range": (0.0, 45.0)})
-    """... and when it is given, or a video's running estimate has settled"""
+    """... and when it is given"""
     min_vp_separation_deg: float = field(default=3.0, metadata={"range": (0.0, 45.0)})
     """peaks closer than this are one VP"""
     orthogonal_sigma_deg: float = field(default=0.0, metadata={"range": (0.0, 45.0)})
     """the final refit's prior that the layout VPs are orthogonal, to within this (0: none,
     as when the focal length is a guess)"""
     known_focal_orthogonal_sigma_deg: float = field(default=1.0, metadata={"range": (0.0, 45.0)})
-    """... and when it is given, or a video's running estimate has settled"""
+    """... and when it is given"""
 
 
 @dataclass(frozen=True)
@@ -103,9 +103,6 @@ class LayoutVPs:
     ``support_px``: summed length of the inlier segments of each layout VP.
     ``others``: K×3 further horizontal VPs (obstacle-VP candidates), ``others_support_px``.
     ``focal_px``: the focal length used to relate VPs in 3-D (orthogonality, horizon).
-    ``fitted_vps``: 3×3, the observed rows as their own segments alone fit them, before
-    the orthogonality prior (``orthogonal_sigma_deg``) leant them to a right angle under
-    ``focal_px``; None: the same as ``vps``.
     """
 
     vps: np.ndarray
@@ -115,7 +112,6 @@ class LayoutVPs:
     others_support_px: np.ndarray = field(default_factory=lambda: np.empty(0))
     focal_px: float = 0.0
     centre: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    fitted_vps: np.ndarray | None = None
 
     @property
     def found(self) -> bool:
@@ -145,7 +141,7 @@ def detect_layout_vps(
     """
     p = params or VPParams()
     centre = principal_point(width, height)
-    vps, observed, support, others, others_support, fitted = layout_vps(
+    vps, observed, support, others, others_support = layout_vps(
         segments, centre[0], centre[1], focal_px, p)
     return LayoutVPs(
         vps=vps,
@@ -155,7 +151,6 @@ def detect_layout_vps(
         others_support_px=others_support,
         focal_px=float(focal_px),
         centre=centre,
-        fitted_vps=fitted if p.orthogonal_sigma_deg > 0 else None,
     )
 
 
