@@ -411,6 +411,15 @@ def _workers(workers: int | None) -> int:
     return workers or min(len(os.sched_getaffinity(0)), 4)
 
 
+# Workers start fresh (spawned), not forked: a fork of a process whose OpenCV thread pool
+# has run (a test session, a caller that ran the pipeline) can hang in its first cv2 call.
+_SPAWN = multiprocessing.get_context("spawn")
+
+
+def _pool(workers: int) -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(max_workers=workers, mp_context=_SPAWN)
+
+
 def _worker(args):
     return evaluate_scene(*args)
 
@@ -459,7 +468,7 @@ def run_eval(
             if progress:
                 progress(len(results), total)
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with _pool(workers) as pool:
             for r in pool.map(_worker, jobs, chunksize=1 if renderer == "pathtraced" else 4):
                 results.append(r)
                 if progress:
@@ -549,7 +558,7 @@ def _run_videos(seed: int, scenes: int, config: Config | None, views: dict[str, 
     """:func:`evaluate_video` for each view, one process a view; ``progress`` counts frames."""
     total = scenes * len(orientations(mirrored)) * len(views)
     workers = min(_workers(workers), len(views))
-    with multiprocessing.Manager() as manager, ProcessPoolExecutor(max_workers=workers) as pool:
+    with _SPAWN.Manager() as manager, _pool(workers) as pool:
         queue = manager.Queue()
         futures = {label: pool.submit(_video_worker, (seed, scenes, config, 0.7, view,
                                                       focal_given, renderer, mirrored, queue))
@@ -761,7 +770,7 @@ def run_clips(split: str, config: Config | None = None, workers: int | None = No
     workers = _workers(workers)
     order = drawing_order(clips, mirrored)
     by_clip: list[list[FrameResult]] = []
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with _pool(workers) as pool:
         jobs = [(seed, i, config, 0.7, length, renderer, flip) for i, flip in order]
         for frames in pool.map(_clip_worker, jobs):
             by_clip.append(frames)
