@@ -130,7 +130,7 @@ def test_a_run_starts_to_fly_the_same_way_every_time():
     # first second. (Later on a run can still part, rarely: docs/flight.md.)
     first, again = _fly(1, "paper"), _fly(1, "paper")
     assert len(first.decisions) > 20 and len(again.decisions) > 20
-    # Where they part, and how, is in the message: the rare flight that does (docs/flight.md).
+    # The message says where, and how, two flights part.
     for a, b in ((first.decisions[:20], again.decisions[:20]), (first.path[:20], again.path[:20])):
         parted = [(k, x, y) for k, (x, y) in enumerate(zip(a, b, strict=False)) if x != y]
         assert a == b, parted[:1] or "lengths differ"
