@@ -128,3 +128,24 @@ def test_decide_frame_steers_by_the_track_only_when_asked_and_confirms_reversals
     far = PolicyConfig(act_within_m=6.0)
     assert decide_frame(-20.0, None, far, TurnHistory(), range_m=9.0)[1].action == "forward"
     assert decide_frame(-20.0, None, far, TurnHistory(), False)[1].action == "hold"
+
+
+def test_the_pass_side_is_where_the_face_points_off_the_course():
+    from companion.control.policy import pass_side
+
+    assert pass_side(20.0, 0.0, 0.0) == 1 and pass_side(-20.0, 0.0, 0.0) == -1
+    # From a heading 29° right, a face read 40° left points 11° left of the course.
+    assert pass_side(-40.0, 29.0, 0.0) == -1 and pass_side(-20.0, 29.0, 0.0) == 1
+    assert pass_side(10.0, 170.0, -175.0) == -1  # across ±180°: 5° left of the course
+
+
+def test_a_frame_asking_for_the_other_side_is_held_back_unless_the_path_is_blocked():
+    from companion.control.policy import keeps_side
+
+    p = PolicyConfig(slow_within_m=3.5)
+    assert not keeps_side(-1, 0, None, p)  # no side taken yet
+    assert not keeps_side(1, 1, None, p)  # the same side
+    assert keeps_side(-1, 1, None, p) and keeps_side(-1, 1, 5.0, p)
+    assert keeps_side(-1, 1, math.inf, p)  # measured: the path is clear
+    assert not keeps_side(-1, 1, 3.0, p)  # something in the path: the side may change
+    assert not keeps_side(-1, 1, None, PolicyConfig(keep_pass_side=False))

@@ -360,3 +360,49 @@ def test_a_vehicle_slowed_by_range_resumes_the_course_only_once_it_has_flown_pas
     assert t > 3.0 + POLICY.resume_after_s + 0.2
     # ... but once 1 m (what full speed covers in resume_after_s) had been flown.
     assert flown_at_resume == pytest.approx(1.0, abs=0.06)
+
+
+def test_the_pass_off_stays_on_the_side_taken_until_the_vehicle_is_back_on_the_course():
+    step = engaged(yaw_deg=0.0)  # course 0°
+    step = see(step.state, 0.1, 40.0, "right", 0.0, 29.0)  # the face 40° right: pass right
+    assert step.state.target_deg == 30.0 and step.state.pass_side == 1
+    # Beside the box, a frame reads a face 12° left of the course (a rug's corner read as
+    # the box's foot): with the side kept, the heading stays right of the course.
+    step = see(step.state, 0.5, -41.0, "left", 29.0)
+    assert step.state.target_deg == 30.0 and step.yaw_rate_deg_s >= 0.0
+    assert step.state.obstacle_t_s == 0.5  # still an obstacle in view: no resume yet
+    # Something measured in the path changes that: the frame is acted on.
+    blocked = fly(step.state, Decision(0.7, TurnCommand("left", -41.0, -30.0), eta_deg=-41.0,
+                                       heading_deg=29.0, path_m=1.0), 0.7, 29.0)
+    assert blocked.state.target_deg == pytest.approx(-1.0) and blocked.state.pass_side == -1
+    # Without keep_pass_side, the lone frame turns the vehicle back across the course.
+    from dataclasses import replace as dc_replace
+    free = supervise(step.state, VehicleStatus(True, True, True, True, yaw_deg=29.0),
+                     Decision(0.7, TurnCommand("left", -41.0, -30.0), eta_deg=-41.0,
+                              heading_deg=29.0), 0.7, FLY,
+                     dc_replace(POLICY, keep_pass_side=False))
+    assert free.state.target_deg == pytest.approx(-1.0) and free.yaw_rate_deg_s < 0.0
+    # Kept: out of view, the course resumes; back on it, the next obstacle picks anew.
+    t = 0.5
+    while t < 10.0 and step.state.pass_side != 0:
+        t = round(t + 0.05, 2)
+        step = fly(step.state, Decision(t, FORWARD), t, yaw_deg=max(0.0, 30.0 - 10.0 * (t - 2.5)))
+    assert step.state.pass_side == 0 and abs(step.state.course_deg) < 1e-9
+    step = see(step.state, t + 0.05, -20.0, "left", 0.0)
+    assert step.state.target_deg == -30.0 and step.state.pass_side == -1
+
+
+def test_without_resume_course_the_side_is_released_once_the_obstacle_is_passed():
+    from dataclasses import replace as dc_replace
+
+    policy = dc_replace(POLICY, resume_course=False)
+    vehicle = VehicleStatus(True, armed=True, in_air=True, offboard=True, yaw_deg=30.0)
+    step = engaged(yaw_deg=0.0)
+    step = supervise(step.state, vehicle, Decision(0.1, RIGHT, 40.0, 0.0), 0.1, FLY, policy)
+    assert step.state.pass_side == 1
+    t = 0.1
+    while t < 10.0 and step.state.pass_side != 0:  # out of view, still 30° off the course
+        t = round(t + 0.05, 2)
+        step = supervise(step.state, vehicle, Decision(t, FORWARD), t, FLY, policy)
+        assert step.yaw_rate_deg_s == 0.0  # no course to resume: the heading is held
+    assert step.state.pass_side == 0 and t >= 0.1 + policy.resume_after_s

@@ -18,12 +18,18 @@ on the wrong side of the centre; alone it must not swing the vehicle back.
 
 In forward flight the same rule is flown as a heading (:func:`avoidance_heading`): the
 heading the frame was taken at plus η, its turn capped at ``max_turn_deg``, held in closed
-loop on the heading the autopilot reports (:func:`heading_rate`). Two additions beyond the
+loop on the heading the autopilot reports (:func:`heading_rate`). Three additions beyond the
 paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
 
 - a pass-off angle: the heading is at least ``min_avoid_deg`` off the course, on the
   face's side. A face only 12°–18° off the course gains too little room when the vehicle
   aligns with it, and the vehicle clipped the obstacle;
+- the side kept: once a pass-off has been taken on one side of the course, a frame that
+  would take it on the other side is not acted on until the vehicle is back on the
+  course (without ``resume_course``: until the obstacle is passed), unless the frame
+  measures an obstacle in the flight path (:func:`keeps_side`). Beside a box just
+  passed, one wrong reading (a rug's corner over a floor seam, read as the box's foot)
+  otherwise turned the vehicle across the course into it;
 - the course resumed: Table II aligns the heading with the face, up to 45° off the course
   the pilot set, and nothing in the paper ever turns back, so the vehicle left the
   obstacle behind and flew on into the side wall. Once no obstacle has been in view for
@@ -48,8 +54,8 @@ from typing import Literal
 from companion.config import PolicyConfig
 
 __all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
-           "decide_frame", "decide_turn", "heading_rate", "obstacle_matters",
-           "path_speed_scale", "steering_eta", "wrap_deg"]
+           "decide_frame", "decide_turn", "heading_rate", "keeps_side", "obstacle_matters",
+           "pass_side", "path_speed_scale", "steering_eta", "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
@@ -121,6 +127,29 @@ def wrap_deg(angle_deg: float) -> float:
     return (angle_deg + 180.0) % 360.0 - 180.0
 
 
+def pass_side(eta_deg: float, heading_deg: float, course_deg: float) -> int:
+    """The side of the course (+1 right, -1 left) an obstacle face seen at bearing
+    ``eta_deg`` from a frame taken at ``heading_deg`` is passed on: where the face points
+    (:func:`avoidance_heading`); +1 for a face along the course."""
+    return 1 if wrap_deg(heading_deg + eta_deg - course_deg) >= 0.0 else -1
+
+
+def keeps_side(side: int, kept_side: int, path_m: float | None,
+               policy: PolicyConfig) -> bool:
+    """Whether a frame that would pass on ``side`` (:func:`pass_side`) is held back, the
+    pass-off having been taken on ``kept_side`` (0: none since the course was last flown):
+    with ``keep_pass_side``, a frame asking for the other side is held back unless it
+    measures an obstacle in the flight path nearer than ``slow_within_m`` (``path_m``,
+    m; None: not measured). The pass-off side was chosen while the obstacle was ahead;
+    beside it, the view is of its flank and of what lies past it, and a reading there
+    that turned across the course would turn into it (module docstring)."""
+    if not policy.keep_pass_side or kept_side == 0 or side == kept_side:
+        return False
+    blocked = (path_m is not None and policy.slow_within_m > 0.0
+               and path_m <= policy.slow_within_m)
+    return not blocked
+
+
 def avoidance_heading(eta_deg: float, heading_deg: float, course_deg: float,
                       policy: PolicyConfig) -> float:
     """The heading (deg, right positive) to fly for an obstacle face seen at bearing
@@ -131,7 +160,7 @@ def avoidance_heading(eta_deg: float, heading_deg: float, course_deg: float,
     course, on the side the face points to (module docstring).
     """
     face = wrap_deg(heading_deg + eta_deg - course_deg)  # the face's direction off course
-    offset = math.copysign(max(abs(face), policy.min_avoid_deg), face)
+    offset = pass_side(eta_deg, heading_deg, course_deg) * max(abs(face), policy.min_avoid_deg)
     turn = wrap_deg(course_deg + offset - heading_deg)
     turn = math.copysign(min(abs(turn), policy.max_turn_deg), turn)
     return wrap_deg(heading_deg + turn)

@@ -21,8 +21,9 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
 - yaw rate, hovering (``forward_speed_m_s`` 0): Table II's turn per decision
   (:func:`yaw_rate_setpoint`), as in the paper's Table IV;
 - yaw rate, flying forward: toward the heading Table II asks for, at least
-  ``policy.min_avoid_deg`` off the course (the heading offboard engaged with), and back to
-  the course once no obstacle has been seen for ``policy.resume_after_s``
+  ``policy.min_avoid_deg`` off the course (the heading offboard engaged with), on the
+  side first taken until the vehicle is back on the course (``policy.keep_pass_side``),
+  and back to the course once no obstacle has been seen for ``policy.resume_after_s``
   (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``). A frame whose
   scene is not understood (``hold``) stops the vehicle but not this turn, which rests on
   earlier frames and the reported heading: stopped and still, the view would never change;
@@ -51,7 +52,9 @@ from companion.control.policy import (
     TurnCommand,
     avoidance_heading,
     heading_rate,
+    keeps_side,
     obstacle_matters,
+    pass_side,
     path_speed_scale,
     wrap_deg,
 )
@@ -104,6 +107,7 @@ class SupervisorState:
     obstacle_t_s: float | None = None  # when a decision last saw an obstacle
     target_deg: float | None = None  # the heading flown to pass it
     target_from_t_s: float | None = None  # the decision that set it
+    pass_side: int = 0  # the side of the course it passes on (+1 right, -1 left; 0: none)
     path_m: float | None = None  # the nearest obstacle in the path, dead-reckoned to now
     path_t_s: float | None = None  # the decision that measured it
     flown_since_seen_m: float = 0.0  # forward distance streamed since obstacle_t_s
@@ -203,7 +207,8 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         course = vehicle.yaw_deg if engaged_now else prev.course_deg
         keep = {} if engaged_now else {"obstacle_t_s": prev.obstacle_t_s,
                                        "target_deg": prev.target_deg,
-                                       "target_from_t_s": prev.target_from_t_s}
+                                       "target_from_t_s": prev.target_from_t_s,
+                                       "pass_side": prev.pass_side}
         if config.forward_speed_m_s > 0.0:
             path, path_t = path_ahead(prev, decision, fresh, now_s, flown_m)
             keep = {**keep, "path_m": path, "path_t_s": path_t}
@@ -220,6 +225,9 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
             passed = seen_t is None or (
                 now_s - seen_t >= policy.resume_after_s
                 and flown >= policy.resume_after_s * config.forward_speed_m_s - 1e-9)
+            if passed and (not policy.resume_course
+                           or abs(wrap_deg(course - vehicle.yaw_deg)) <= policy.deadband_deg):
+                keep["pass_side"] = 0  # back on the course: the next obstacle picks anew
             rate = 0.0
             if fresh:  # also in hold: the heading comes from telemetry, not this frame
                 if policy.resume_course and passed:
@@ -288,7 +296,9 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
 
     A decision that turns (or sees the face aligned, within the deadband) sets the target
     from its η and heading; one whose turn the reversal rule held back (``forward`` with
-    η outside the deadband) leaves the target as it was.
+    η outside the deadband), or that asks to pass on the other side of the course than
+    the pass-off taken (:func:`~companion.control.policy.keeps_side`), leaves the target
+    as it was.
     """
     if (not fresh or decision is None or decision.eta_deg is None
             or not obstacle_matters(decision.range_m, policy)):
@@ -298,8 +308,12 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
         return keep
     action, eta = decision.command.action, decision.eta_deg
     if action in ("left", "right") or (action == "forward" and abs(eta) <= policy.deadband_deg):
+        side = pass_side(eta, decision.heading_deg, course_deg)
+        if keeps_side(side, keep.get("pass_side", 0), decision.path_m, policy):
+            return keep
         keep["target_deg"] = avoidance_heading(eta, decision.heading_deg, course_deg, policy)
         keep["target_from_t_s"] = decision.t_s
+        keep["pass_side"] = side
     return keep
 
 
