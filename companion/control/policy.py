@@ -139,15 +139,14 @@ def keeps_side(side: int, kept_side: int, path_m: float | None,
     """Whether a frame that would pass on ``side`` (:func:`pass_side`) is held back, the
     pass-off having been taken on ``kept_side`` (0: none since the course was last flown):
     with ``keep_pass_side``, a frame asking for the other side is held back unless it
-    measures an obstacle in the flight path nearer than ``slow_within_m`` (``path_m``,
-    m; None: not measured). The pass-off side was chosen while the obstacle was ahead;
-    beside it, the view is of its flank and of what lies past it, and a reading there
-    that turned across the course would turn into it (module docstring)."""
+    measures an obstacle in the flight path near enough to slow the vehicle
+    (``path_m``, m; None: not measured; :func:`path_speed_scale`). The pass-off side was
+    chosen while the obstacle was ahead; beside it, the view is of its flank and of what
+    lies past it, and a reading there that turned across the course would turn into it
+    (module docstring)."""
     if not policy.keep_pass_side or kept_side == 0 or side == kept_side:
         return False
-    blocked = (path_m is not None and policy.slow_within_m > 0.0
-               and path_m <= policy.slow_within_m)
-    return not blocked
+    return path_speed_scale(path_m, policy) >= 1.0  # nothing slows it: the side holds
 
 
 def avoidance_heading(eta_deg: float, heading_deg: float, course_deg: float,
