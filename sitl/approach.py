@@ -57,7 +57,6 @@ reports.
 from __future__ import annotations
 
 import math
-import multiprocessing
 import os
 import threading
 import time
@@ -84,6 +83,7 @@ from sitl.scene import (
     render_image,
     scene_truth,
 )
+from sitl.workers import SPAWN
 
 __all__ = ["Approach", "RunResult", "draw_approach", "fly_approach", "first_contact",
            "format_report", "run_approaches", "summarize", "write_trajectories"]
@@ -581,8 +581,7 @@ def run_approaches(runs: int, seed: int, policy: str, *, workers: int = 2,
         # One core each: BLAS or OpenCV threads of their own would only contend.
         for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(name, "1")
-        with multiprocessing.get_context("spawn").Pool(workers, initializer=cv2.setNumThreads,
-                                                       initargs=(1,)) as pool:
+        with SPAWN.Pool(workers, initializer=cv2.setNumThreads, initargs=(1,)) as pool:
             for item in pool.imap_unordered(_one, jobs):
                 out.append(item)
                 if progress:

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
 import resource
 import tempfile
 import time
@@ -33,6 +32,7 @@ from companion.control.policy import decide_turn
 from companion.vision.lines import make_detector, to_gray
 from companion.vision.pipeline import STAGES, Pipeline
 from sitl.scene import random_scene, render
+from sitl.workers import SPAWN
 
 __all__ = ["add_arguments", "bench", "RESOLUTIONS"]
 
@@ -222,7 +222,6 @@ def bench(args: argparse.Namespace, config: Config | None = None) -> int:
         raise ValueError("--frames, --repeat and --latency-frames must be at least 1")
     sizes = [_parse_resolution(r) for r in args.resolutions]
     figures: dict = {"resolutions": {}}
-    ctx = multiprocessing.get_context("spawn")
     with tempfile.TemporaryDirectory() as tmp:
         videos = {}
         for w, h in sizes:
@@ -231,7 +230,7 @@ def bench(args: argparse.Namespace, config: Config | None = None) -> int:
             focal = _write_video(path, w, h, args.frames, args.seed)
             videos[(w, h)] = (str(path), focal)
         for (w, h), (video, focal) in videos.items():
-            with ctx.Pool(1) as pool:  # a fresh process per resolution: its own peak RSS
+            with SPAWN.Pool(1) as pool:  # a fresh process per resolution: its own peak RSS
                 res = pool.apply(_time_resolution,
                                  (video, None if args.no_focal else focal, args.repeat, cfg))
             figures["resolutions"][f"{w}x{h}"] = res

@@ -40,7 +40,6 @@ version, the seed, the index and the camera.
 from __future__ import annotations
 
 import math
-import multiprocessing
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -62,6 +61,7 @@ from sitl.scene import (
     random_scene,
     render,
 )
+from sitl.workers import SPAWN
 
 __all__ = ["View", "SceneResult", "EvalReport", "evaluate_scene", "evaluate_video", "run_eval",
            "format_report", "SPLITS", "CAMERAS", "RENDERERS", "run_split", "format_splits", "CLIPS",
@@ -411,13 +411,8 @@ def _workers(workers: int | None) -> int:
     return workers or min(len(os.sched_getaffinity(0)), 4)
 
 
-# Workers start fresh (spawned), not forked: a fork of a process whose OpenCV thread pool
-# has run (a test session, a caller that ran the pipeline) can hang in its first cv2 call.
-_SPAWN = multiprocessing.get_context("spawn")
-
-
 def _pool(workers: int) -> ProcessPoolExecutor:
-    return ProcessPoolExecutor(max_workers=workers, mp_context=_SPAWN)
+    return ProcessPoolExecutor(max_workers=workers, mp_context=SPAWN)
 
 
 def _worker(args):
@@ -558,7 +553,7 @@ def _run_videos(seed: int, scenes: int, config: Config | None, views: dict[str, 
     """:func:`evaluate_video` for each view, one process a view; ``progress`` counts frames."""
     total = scenes * len(orientations(mirrored)) * len(views)
     workers = min(_workers(workers), len(views))
-    with _SPAWN.Manager() as manager, _pool(workers) as pool:
+    with SPAWN.Manager() as manager, _pool(workers) as pool:
         queue = manager.Queue()
         futures = {label: pool.submit(_video_worker, (seed, scenes, config, 0.7, view,
                                                       focal_given, renderer, mirrored, queue))
