@@ -25,6 +25,18 @@ def test_a_one_frame_detection_is_not_reported():
     assert _run([(20.0, 3.0), (None, 3.0), (None, 3.0)]) == [None, None, None]
 
 
+def test_a_first_frame_two_corner_pairs_agree_on_is_reported_but_not_bridged():
+    # Two pairs of one frame, each on its own legs, are two measurements of the OVPs: the
+    # detection is reported at once. The track itself still needs a second frame, so a
+    # drop-out after that one frame is not predicted through as a confirmed track's is.
+    track, first = update_track(None, 20.0, 3.0, pairs=2)
+    assert first == pytest.approx(20.0)
+    track, after = update_track(track, None, 3.0)
+    assert after is None and track is None
+    assert update_track(None, 20.0, 3.0, pairs=1)[1] is None
+    assert update_track(None, 20.0, 3.0, TrackParams(report_pairs=0), pairs=5)[1] is None
+
+
 def test_confirmed_after_two_consistent_frames():
     out = _run([(20.0, 3.0), (20.4, 3.0), (20.2, 3.0)])
     assert out[0] is None

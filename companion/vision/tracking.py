@@ -17,7 +17,10 @@ room's four walls are each 90° apart). The track keeps that angle, so that
   is near 45° to the line of sight, is kept until the other OVP is nearer the frame centre
   by more than ``switch_margin_deg``;
 - a detection seen in one frame only is not reported: a track is confirmed after
-  ``confirm_hits`` consistent frames.
+  ``confirm_hits`` consistent frames, unless ``report_pairs`` of the frame's corner pairs
+  agree on it (``Obstacle.pairs``): two corners of one frame whose legs give the same OVPs
+  are two measurements of them, as two frames are. Such a first frame is reported, but the track is
+  still confirmed by frames, so a drop-out is bridged only after a second one.
 
 Inputs are plain values (the frame's η and the layout's η_room, degrees); the camera's
 yaw never has to be known, so a recording is tracked as well as a flight. Pure functions;
@@ -43,6 +46,8 @@ class TrackParams:
     """a detection whose face angle to the room differs more is another obstacle"""
     confirm_hits: int = 2
     """consistent frames before a track's η is reported"""
+    report_pairs: int = 2
+    """... or corner pairs of one frame that agree on the detection (0: frames only)"""
     max_missed: int = 3
     """frames a confirmed track is predicted through without a detection"""
     switch_margin_deg: float = 8.0
@@ -76,12 +81,13 @@ def update_track(
     eta_deg: float | None,
     eta_room_deg: float | None,
     params: TrackParams | None = None,
+    pairs: int = 1,
 ) -> tuple[Track | None, float | None]:
     """One frame: the new track and the tracked η in degrees (None: nothing to report).
 
     ``eta_deg``: this frame's η (eq. 10), None without a detection; ``eta_room_deg``: eq. 10
     of a horizontal layout VP, None when the layout was not seen (the track then holds its
-    last η while it lasts).
+    last η while it lasts); ``pairs``: the corner pairs the detection rests on.
     """
     p = params or TrackParams()
     if eta_deg is not None and eta_room_deg is not None:
@@ -101,7 +107,8 @@ def update_track(
             return _predict(track, eta_room_deg, p)
         else:
             track = Track(rel, eta_deg)
-        return track, (track.eta_deg if track.confirmed(p) else None)
+        measured_twice = 0 < p.report_pairs <= pairs
+        return track, (track.eta_deg if track.confirmed(p) or measured_twice else None)
     if track is None:
         return None, None
     return _predict(track, eta_room_deg, p)
