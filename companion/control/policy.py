@@ -73,7 +73,7 @@ class TurnCommand:
 def steering_eta(eta_deg: float | None, eta_tracked_deg: float | None,
                  policy: PolicyConfig) -> float | None:
     """The η to steer by: the frame's (eq. 10), or with ``steer_by_track`` the tracked one
-    where a track is confirmed (it holds eq. 9's choice of face and bridges dropouts)."""
+    wherever the tracker reports one (it holds eq. 9's choice of face and bridges dropouts)."""
     if policy.steer_by_track and eta_tracked_deg is not None:
         return eta_tracked_deg
     return eta_deg
