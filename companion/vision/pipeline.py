@@ -599,13 +599,14 @@ class Pipeline:
 
         depth = self.depth_for(w)
         eta = phi = m = None
+        pairs = 0
         if obstacles:
             ovps = obstacles[0].ovps[:2]
             hd = heading_from_vp(ovps[closest_to_centre(ovps, centre)], centre, depth)
             eta, phi, m = hd.eta_deg, hd.phi_deg, hd.m_px
+            pairs = obstacles[0].pairs
         self.track, eta_tracked = update_track(self.track, eta,
-                                               _room_eta(layout, centre, depth),
-                                               pairs=obstacles[0].pairs if obstacles else 0)
+                                               _room_eta(layout, centre, depth), pairs=pairs)
         height = camera_height_m or self.config.camera.height_m
         contacts: tuple[tuple[FloorContact, ...], ...] = ()
         if obstacles and height and layout.observed[V3]:
