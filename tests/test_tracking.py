@@ -26,8 +26,8 @@ def test_a_one_frame_detection_is_not_reported():
 
 
 def test_a_first_frame_two_corner_pairs_agree_on_is_reported_but_not_bridged():
-    # Two pairs of one frame, each on its own legs, are two measurements of the OVPs: the
-    # detection is reported at once. The track itself still needs a second frame, so a
+    # Two corners of one frame whose legs give the same OVPs are two measurements of them:
+    # the detection is reported at once. The track itself still needs a second frame, so a
     # drop-out after that one frame is not predicted through as a confirmed track's is.
     track, first = update_track(None, 20.0, 3.0, pairs=2)
     assert first == pytest.approx(20.0)

@@ -19,8 +19,8 @@ room's four walls are each 90° apart). The track keeps that angle, so that
 - a detection seen in one frame only is not reported: a track is confirmed after
   ``confirm_hits`` consistent frames, unless ``report_pairs`` of the frame's corner pairs
   agree on it (``Obstacle.pairs``): two corners of one frame whose legs give the same OVPs
-  are two measurements of them, as two frames are. Such a first frame is reported, but the track is
-  still confirmed by frames, so a drop-out is bridged only after a second one.
+  are two measurements of them, as two frames are. Such a first frame is reported, but
+  the track is still confirmed by frames, so a drop-out is bridged only after a second.
 
 Inputs are plain values (the frame's η and the layout's η_room, degrees); the camera's
 yaw never has to be known, so a recording is tracked as well as a flight. Pure functions;
