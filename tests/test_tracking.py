@@ -32,9 +32,23 @@ def test_a_first_frame_two_corner_pairs_agree_on_is_reported_but_not_bridged():
     track, first = update_track(None, 20.0, 3.0, pairs=2)
     assert first == pytest.approx(20.0)
     track, after = update_track(track, None, 3.0)
-    assert after is None and track is None
+    assert after is None and not track.confirmed(TrackParams())
     assert update_track(None, 20.0, 3.0, pairs=1)[1] is None
     assert update_track(None, 20.0, 3.0, TrackParams(report_pairs=0), pairs=5)[1] is None
+
+
+def test_a_detection_waits_one_frame_of_noise_or_drop_out_for_its_second():
+    # Track initiation by M-of-N logic (2 of 3): the frame between two consistent ones may
+    # miss the obstacle or read it 15° off without replacing the first.
+    for between in [(None, 3.0), (35.0, 3.0)]:
+        out = _run([(20.0, 3.0), between, (20.4, 3.0), (20.2, 3.0)])
+        assert out[:2] == [None, None]
+        assert out[2] == pytest.approx(20.2) and out[3] == pytest.approx(20.2)
+    # Two frames between are too many: the third consistent frame starts afresh.
+    assert _run([(20.0, 3.0), (None, 3.0), (35.0, 3.0), (20.4, 3.0)]) == [None] * 4
+    # A confirm_window of confirm_hits: consistent frames in a row only.
+    assert _run([(20.0, 3.0), (None, 3.0), (20.4, 3.0)], TrackParams(confirm_window=2)) == [
+        None] * 3
 
 
 def test_confirmed_after_two_consistent_frames():

@@ -17,10 +17,13 @@ room's four walls are each 90° apart). The track keeps that angle, so that
   is near 45° to the line of sight, is kept until the other OVP is nearer the frame centre
   by more than ``switch_margin_deg``;
 - a detection seen in one frame only is not reported: a track is confirmed after
-  ``confirm_hits`` consistent frames, unless ``report_pairs`` of the frame's corner pairs
-  agree on it (``Obstacle.pairs``): two corners of one frame whose legs give the same OVPs
-  are two measurements of them, as two frames are. Such a first frame is reported, but
-  the track is still confirmed by frames, so a drop-out is bridged only after a second.
+  ``confirm_hits`` consistent frames among the last ``confirm_window`` (track initiation
+  by M-of-N logic: an unconfirmed detection waits for its second frame through one
+  frame's drop-out or noise, which does not replace it), unless ``report_pairs`` of the
+  frame's corner pairs agree on it (``Obstacle.pairs``): two corners of one frame whose
+  legs give the same OVPs are two measurements of them, as two frames are. Such a first
+  frame is reported, but the track is still confirmed by frames, so a drop-out is bridged
+  only after a second.
 
 Inputs are plain values (the frame's η and the layout's η_room, degrees); the camera's
 yaw never has to be known, so a recording is tracked as well as a flight. Pure functions;
@@ -29,7 +32,7 @@ yaw never has to be known, so a recording is tracked as well as a flight. Pure f
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 __all__ = ["TrackParams", "Track", "wrap90", "update_track"]
 
@@ -46,6 +49,8 @@ class TrackParams:
     """a detection whose face angle to the room differs more is another obstacle"""
     confirm_hits: int = 2
     """consistent frames before a track's η is reported"""
+    confirm_window: int = 3
+    """... among this many (``confirm_hits``: in a row)"""
     report_pairs: int = 2
     """... or corner pairs of one frame that agree on the detection (0: frames only)"""
     max_missed: int = 3
@@ -60,12 +65,15 @@ class TrackParams:
 class Track:
     """``rel_deg``: the obstacle face's angle to the room axes, (−45°, 45°];
     ``eta_deg``: the tracked η it gave in the last frame (on the OVP eq. 9 follows);
-    ``hits``: consistent detections so far; ``missed``: frames since the last one."""
+    ``hits``: consistent detections so far; ``missed``: frames since the last one;
+    ``earlier``: unconfirmed tracks of the last frames that this one disagreed with, each
+    still waiting for its second frame (``TrackParams.confirm_window``)."""
 
     rel_deg: float
     eta_deg: float
     hits: int = 1
     missed: int = 0
+    earlier: tuple[Track, ...] = ()
 
     def confirmed(self, params: TrackParams) -> bool:
         return self.hits >= params.confirm_hits
@@ -92,21 +100,25 @@ def update_track(
     p = params or TrackParams()
     if eta_deg is not None and eta_room_deg is not None:
         rel = wrap90(eta_deg - eta_room_deg)
-        if track is not None and abs(wrap90(rel - track.rel_deg)) <= p.gate_deg:
+        # The track, and while it is unconfirmed the earlier ones still waiting.
+        waiting = () if track is None else (track, *track.earlier)
+        same = [t for t in waiting if abs(wrap90(rel - t.rel_deg)) <= p.gate_deg]
+        if same:
             # The same obstacle: keep the OVP being followed unless the other one is
             # clearly nearer the centre.
-            kept = _nearest_branch(eta_deg, track.eta_deg)
+            t = min(same, key=lambda t: abs(wrap90(rel - t.rel_deg)))
+            kept = _nearest_branch(eta_deg, t.eta_deg)
             branch = eta_deg if abs(eta_deg) + p.switch_margin_deg < abs(kept) else kept
-            new_rel = wrap90(track.rel_deg + p.smoothing * wrap90(rel - track.rel_deg))
+            new_rel = wrap90(t.rel_deg + p.smoothing * wrap90(rel - t.rel_deg))
             eta = _nearest_branch(new_rel + eta_room_deg, branch)
-            track = Track(new_rel, eta, track.hits + 1, 0)
+            track = Track(new_rel, eta, t.hits + 1, 0)
         elif track is not None and track.confirmed(p) and track.missed < p.max_missed:
             # Another obstacle, or a false alarm: the confirmed track is predicted on, and
             # the newcomer must show up again to take over (it does: hits start at 1 each
             # time, so a second consistent frame is needed after the track runs out).
             return _predict(track, eta_room_deg, p)
         else:
-            track = Track(rel, eta_deg)
+            track = Track(rel, eta_deg, earlier=_waiting(waiting, p))
         measured_twice = 0 < p.report_pairs <= pairs
         return track, (track.eta_deg if track.confirmed(p) or measured_twice else None)
     if track is None:
@@ -114,10 +126,21 @@ def update_track(
     return _predict(track, eta_room_deg, p)
 
 
+def _waiting(tracks: tuple[Track, ...], p: TrackParams) -> tuple[Track, ...]:
+    """Unconfirmed ``tracks`` a frame older: each waits through at most ``confirm_window
+    − confirm_hits`` frames without it (the defaults: one)."""
+    return tuple(replace(t, missed=t.missed + 1, earlier=()) for t in tracks
+                 if not t.confirmed(p) and t.missed < p.confirm_window - p.confirm_hits)
+
+
 def _predict(track: Track, eta_room_deg: float | None, p: TrackParams
              ) -> tuple[Track | None, float | None]:
-    """A frame without a consistent detection: predict from the room, or drop the track."""
-    if track.missed >= p.max_missed or not track.confirmed(p):
+    """A frame without a consistent detection: predict from the room, or drop the track
+    (an unconfirmed one waits on, unreported, while it can still be confirmed)."""
+    if not track.confirmed(p):
+        waiting = _waiting((track, *track.earlier), p)
+        return (replace(waiting[0], earlier=waiting[1:]) if waiting else None), None
+    if track.missed >= p.max_missed:
         return None, None
     eta = track.eta_deg
     if eta_room_deg is not None:
