@@ -222,7 +222,8 @@ class Estimate:
     (given, estimated, assumed); ``depth_px``: D of eq. 10 (configured, else the given
     focal length, else the video's running estimate of it, else half the width).
     ``eta_tracked_deg``: η of the obstacle tracked across this video's frames
-    (:mod:`~companion.vision.tracking`), None without a confirmed track.
+    (:mod:`~companion.vision.tracking`), None while the tracker reports nothing (no
+    confirmed track, and no first frame that two corner pairs agree on).
     ``obstacle_contacts``: per obstacle, its floor contacts (range and bearing,
     :mod:`~companion.vision.ranging`), empty without the camera height
     (``camera_height_m``) or a vertical edge whose foot is seen; ``contact``, ``range_m``:
