@@ -107,8 +107,21 @@ def test_a_false_alarm_beside_a_confirmed_track_does_not_move_it():
 
 def test_another_obstacle_takes_over_when_the_track_runs_out():
     p = TrackParams(max_missed=1)
-    frames = [(20.0, 0.0), (20.0, 0.0), (-30.0, 0.0), (-30.0, 0.0), (-30.0, 0.0), (-30.5, 0.0)]
+    frames = [(20.0, 0.0), (20.0, 0.0), (None, 0.0), (-30.0, 0.0), (-30.0, 0.0), (-30.5, 0.0)]
     out = _run(frames, p)
     assert out[2] == pytest.approx(20.0)
     assert out[3] is None  # the old track ended; the newcomer starts unconfirmed
     assert out[4] == pytest.approx(-30.0) and out[5] == pytest.approx(-30.25)
+
+
+def test_two_frames_agreeing_on_another_face_angle_take_over_from_a_coasting_track():
+    # A track confirmed on two wrong frames (20°) meets the obstacle (−30°, 50° away, far
+    # outside the gate): it is predicted on, but the newcomer waits beside it, and its
+    # second frame, even after a frame without a detection, replaces it at once rather
+    # than after the track's max_missed frames of coasting.
+    out = _run([(20.0, 0.0), (20.0, 0.0), (-30.0, 0.0), (-30.0, 0.0), (-30.5, 0.0)])
+    assert out[2] == pytest.approx(20.0)
+    assert out[3] == pytest.approx(-30.0) and out[4] == pytest.approx(-30.25)
+    out = _run([(20.0, 0.0), (20.0, 0.0), (-30.0, 0.0), (None, 2.0), (-28.0, 2.0)])
+    assert out[3] == pytest.approx(22.0)  # still the old track, carried by the room
+    assert out[4] == pytest.approx(-28.0)

@@ -23,7 +23,12 @@ room's four walls are each 90° apart). The track keeps that angle, so that
   frame's corner pairs agree on it (``Obstacle.pairs``): two corners of one frame whose
   legs give the same OVPs are two measurements of them, as two frames are. Such a first
   frame is reported, but the track is still confirmed by frames, so a drop-out is bridged
-  only after a second.
+  only after a second;
+- a confirmed track whose detections stop agreeing with it is predicted on for up to
+  ``max_missed`` frames, while the disagreeing detection waits beside it as an unconfirmed
+  track: confirmed in turn, it takes over at once (two frames that agree on another face
+  angle outweigh a prediction), so a track that began on a wrong pair of frames does not
+  hold out against the obstacle for its whole coast.
 
 Inputs are plain values (the frame's η and the layout's η_room, degrees); the camera's
 yaw never has to be known, so a recording is tracked as well as a flight. Pure functions;
@@ -67,7 +72,8 @@ class Track:
     ``eta_deg``: the tracked η it gave in the last frame (on the OVP eq. 9 follows);
     ``hits``: consistent detections so far; ``missed``: frames since the last one;
     ``earlier``: unconfirmed tracks of the last frames that this one disagreed with, each
-    still waiting for its second frame (``TrackParams.confirm_window``)."""
+    still waiting for its second frame (``TrackParams.confirm_window``); the first to get
+    it replaces this one."""
 
     rel_deg: float
     eta_deg: float
@@ -100,7 +106,7 @@ def update_track(
     p = params or TrackParams()
     if eta_deg is not None and eta_room_deg is not None:
         rel = wrap90(eta_deg - eta_room_deg)
-        # The track, and while it is unconfirmed the earlier ones still waiting.
+        # The track, and the unconfirmed ones still waiting before or beside it.
         waiting = () if track is None else (track, *track.earlier)
         same = [t for t in waiting if abs(wrap90(rel - t.rel_deg)) <= p.gate_deg]
         if same:
@@ -113,10 +119,10 @@ def update_track(
             eta = _nearest_branch(new_rel + eta_room_deg, branch)
             track = Track(new_rel, eta, t.hits + 1, 0)
         elif track is not None and track.confirmed(p) and track.missed < p.max_missed:
-            # Another obstacle, or a false alarm: the confirmed track is predicted on, and
-            # the newcomer must show up again to take over (it does: hits start at 1 each
-            # time, so a second consistent frame is needed after the track runs out).
-            return _predict(track, eta_room_deg, p)
+            # Another obstacle, a false alarm, or this track was the false one: it is
+            # predicted on, and the newcomer waits beside it for a second frame.
+            coasting, eta = _predict(track, eta_room_deg, p)
+            return replace(coasting, earlier=(Track(rel, eta_deg), *coasting.earlier)), eta
         else:
             track = Track(rel, eta_deg, earlier=_waiting(waiting, p))
         measured_twice = 0 < p.report_pairs <= pairs
@@ -136,14 +142,13 @@ def _waiting(tracks: tuple[Track, ...], p: TrackParams) -> tuple[Track, ...]:
 def _predict(track: Track, eta_room_deg: float | None, p: TrackParams
              ) -> tuple[Track | None, float | None]:
     """A frame without a consistent detection: predict from the room, or drop the track
-    (an unconfirmed one waits on, unreported, while it can still be confirmed)."""
-    if not track.confirmed(p):
-        waiting = _waiting((track, *track.earlier), p)
+    (an unconfirmed one waits on, unreported, while it can still be confirmed; so do the
+    newcomers waiting beside a confirmed one)."""
+    if not track.confirmed(p) or track.missed >= p.max_missed:
+        waiting = _waiting((track, *track.earlier), p)  # a confirmed track is not among them
         return (replace(waiting[0], earlier=waiting[1:]) if waiting else None), None
-    if track.missed >= p.max_missed:
-        return None, None
     eta = track.eta_deg
     if eta_room_deg is not None:
         eta = _nearest_branch(track.rel_deg + eta_room_deg, track.eta_deg)
-    track = Track(track.rel_deg, eta, track.hits, track.missed + 1)
+    track = Track(track.rel_deg, eta, track.hits, track.missed + 1, _waiting(track.earlier, p))
     return track, eta
