@@ -27,8 +27,8 @@ room's four walls are each 90° apart). The track keeps that angle, so that
 - a confirmed track whose detections stop agreeing with it is predicted on for up to
   ``max_missed`` frames, while the disagreeing detection waits beside it as an unconfirmed
   track: confirmed in turn, it takes over at once (two frames that agree on another face
-  angle outweigh a prediction), so a track that began on a wrong pair of frames does not
-  hold out against the obstacle for its whole coast.
+  angle outweigh a prediction), so the tracked η follows the obstacle the frames now show
+  (another piece, or the real one after a false pair) without waiting out the coast.
 
 Inputs are plain values (the frame's η and the layout's η_room, degrees); the camera's
 yaw never has to be known, so a recording is tracked as well as a flight. Pure functions;
