@@ -108,11 +108,14 @@ def update_track(
         rel = wrap90(eta_deg - eta_room_deg)
         # The track, and the unconfirmed ones still waiting before or beside it.
         waiting = () if track is None else (track, *track.earlier)
-        same = [t for t in waiting if abs(wrap90(rel - t.rel_deg)) <= p.gate_deg]
-        if same:
+
+        def gap(t: Track) -> float:
+            return abs(wrap90(rel - t.rel_deg))
+
+        t = min(waiting, key=gap, default=None)
+        if t is not None and gap(t) <= p.gate_deg:
             # The same obstacle: keep the OVP being followed unless the other one is
             # clearly nearer the centre.
-            t = min(same, key=lambda t: abs(wrap90(rel - t.rel_deg)))
             kept = _nearest_branch(eta_deg, t.eta_deg)
             branch = eta_deg if abs(eta_deg) + p.switch_margin_deg < abs(kept) else kept
             new_rel = wrap90(t.rel_deg + p.smoothing * wrap90(rel - t.rel_deg))
