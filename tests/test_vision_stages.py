@@ -722,6 +722,37 @@ def test_a_rug_corner_beside_the_corner_of_a_manhattan_thing_is_no_box():
     assert len(found([*top, *top_front], V1)) == 1
 
 
+def test_an_outline_edge_whose_foot_stops_short_still_meets_its_leg():
+    # The box above, its outline edge dimmed at the foot by the box's own contact shadow:
+    # the detector stops it short of the bottom edge that runs on to the hidden corner.
+    # As a corner's vertical leg may, it meets that leg across radius_px and leg_gap_frac
+    # of its length (10 + 0.15 · 65 px), but no further, and not where a room edge leaves
+    # its foot (a door post standing on the floor line, a rug's corner just below it).
+    from companion.vision.obstacles import find_obstacles
+
+    segs, labels, faces = _bottom_of_box_with_unseen_front_edge()
+    foot, top = segs[2, :2], segs[2, 2:]
+    up = (top - foot) / np.linalg.norm(top - foot)
+    assert 60.0 < np.linalg.norm(top - foot) < 70.0
+
+    def found(gap_px, extra=(), label=()):
+        short = segs.copy()
+        short[2, :2] = foot + gap_px * up
+        more = np.vstack([short, *extra]) if extra else short
+        lab = np.append(labels, label)
+        return find_obstacles(more, find_corners(more, lab), _room_layout(), lab == NONE, lab)
+
+    assert len(found(0.0)) == 1
+    shadowed = found(16.0)  # beyond radius_px: met only by the gap
+    assert len(shadowed) == 1
+    dirs = direction_of(shadowed[0].ovps[:2], F, C)
+    for face in faces:
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+    assert found(26.0) == []
+    raised = foot + 16.0 * up
+    assert found(16.0, [[*raised, *(raised + [-60.0, 0.0])]], [V1]) == []
+
+
 def _face_of_rotated_box(yaw_deg=35.0):
     """One face of a tall box 4 m ahead, ``yaw_deg`` off the view: its two vertical edges
     and its top and bottom edges (the other face shows nothing). Returns the segments, the

@@ -494,31 +494,74 @@ cdef inline bint leaves_end(double[:, ::1] s, double[::1] lengths, Py_ssize_t f,
     return fabs(side[0]) >= MIN_SIDE
 
 
-cdef list edge_legs(double[:, ::1] s, double[::1] lengths, list chains,
-                    Py_ssize_t[::1] free_idx, Params* p):
+cdef list edge_legs(Frame* fr, double[:, ::1] s, double[::1] lengths, list chains,
+                    Py_ssize_t[::1] free_idx, Py_ssize_t[::1] room_idx, Params* p):
     """Vertical edges with the non-Manhattan legs that end at each of their two ends.
 
     Returns a list of (chain, legs_a, legs_b) with ``chain`` one of ``chains``
-    (:func:`vertical_chains`); a leg is (segment index, side): the side (±1) of the edge it
-    leaves toward. Legs are at least 20° off the edge (:func:`leaves_end`)."""
+    (:func:`vertical_chains`), or that chain grown at its foot (below); a leg is (segment
+    index, side): the side (±1) of the edge it leaves toward. Legs are at least 20° off
+    the edge (:func:`leaves_end`).
+
+    An edge's foot, its lower end, may stop short of the junction of its legs by as much
+    as a corner's vertical leg may (``radius_px + leg_gap_frac`` of its length): where a
+    piece stands on the floor its own contact shadow dims the edge's last pixels. With no
+    leg at the foot, a leg ending on the edge's line beyond it, within that gap, is met
+    there, and the chain grown to it."""
     out = []
     if free_idx.shape[0] == 0 or not chains:
         return out
-    cdef double ex, ey, axx, axy, side
-    cdef Py_ssize_t j, f, end
+    cdef double ex, ey, axx, axy, side, ox, oy, t, reach
+    cdef Py_ssize_t j, f, end, q
     for chain in chains:
         xa, ya, xb, yb, length = chain
         axx, axy = (xb - xa) / length, (yb - ya) / length
+        ends = [(xa, ya), (xb, yb)]
         legs = ([], [])
         for end in range(2):
-            ex, ey = (xa, ya) if end == 0 else (xb, yb)
+            ex, ey = ends[end]
+            attached_legs(s, lengths, free_idx, ex, ey, axx, axy, p, legs[end])
+            if legs[end] or below_horizon(fr, ex, ey) <= below_horizon(fr, ends[1 - end][0],
+                                                                        ends[1 - end][1]):
+                continue
+            # A room edge leaving the foot: the edge stands there, on the room's floor line
+            # (a door post, an aligned box), and what lies below is something else's.
+            room_legs = []
+            attached_legs(s, lengths, room_idx, ex, ey, axx, axy, p, room_legs)
+            if room_legs:
+                continue
+            # The foot, with no leg: the nearest leg end on the edge's line below it.
+            ox, oy = (-axx, -axy) if end == 0 else (axx, axy)
+            reach = INF
             for j in range(free_idx.shape[0]):
                 f = free_idx[j]
-                if leaves_end(s, lengths, f, ex, ey, axx, axy, p, &side):
-                    legs[end].append((f, 1.0 if side > 0 else -1.0))
+                for q in range(2):
+                    t = (s[f, 2 * q] - ex) * ox + (s[f, 2 * q + 1] - ey) * oy
+                    if p.radius_px < t <= p.radius_px + p.leg_gap_frac * length \
+                            and t < reach and leaves_end(s, lengths, f, ex + t * ox,
+                                                         ey + t * oy, axx, axy, p, &side):
+                        reach = t
+            if reach < INF:
+                ex, ey = ex + reach * ox, ey + reach * oy
+                ends[end] = (ex, ey)
+                attached_legs(s, lengths, free_idx, ex, ey, axx, axy, p, legs[end])
+                chain = (ends[0][0], ends[0][1], ends[1][0], ends[1][1], length + reach)
         if legs[0] or legs[1]:
             out.append((chain, legs[0], legs[1]))
     return out
+
+
+cdef void attached_legs(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1] among,
+                        double ex, double ey, double axx, double axy, Params* p,
+                        list out) except *:
+    """Appends to ``out`` the segments of ``among`` that leave the end (ex, ey) of a
+    vertical edge along (axx, axy) (:func:`leaves_end`), as (segment index, side)."""
+    cdef double side
+    cdef Py_ssize_t j, f
+    for j in range(among.shape[0]):
+        f = among[j]
+        if leaves_end(s, lengths, f, ex, ey, axx, axy, p, &side):
+            out.append((f, 1.0 if side > 0 else -1.0))
 
 
 cdef inline bint points_at_neither(double[:, ::1] s, Py_ssize_t k, const double* o1,
@@ -1528,7 +1571,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
         chains = vertical_chains(s, lengths, lines, verticals, &p)
-        edges = edge_legs(s, lengths, chains, free_idx, &p)
+        edges = edge_legs(&fr, s, lengths, chains, free_idx, room_idx, &p)
         silhouette_halves(&fr, &p, s, lengths, lines, edges, manhattan_idx, &halves)
         pair_halves(&fr, &p, s, lines, &halves, &found)
         # Step 0 is the above; then, while nothing is found, the fallbacks in turn.
