@@ -446,7 +446,10 @@ def test_a_leg_at_each_end_takes_the_edges_other_legs_into_its_fit():
         labels = np.array([V3] + [NONE] * (len(segs) - 1))
         no_corners = find_corners(segs, labels).take(np.zeros(0, int))
         found = find_obstacles(segs, no_corners, _room_layout(), labels == NONE, labels)
-        assert len(found) == 1
+        # The edge's hypothesis, the tallest, drives η; the other rules that read the box
+        # from its bottom legs alone come after it.
+        assert found and found[0].height_px == max(o.height_px for o in found)
+        assert abs(found[0].height_px - np.linalg.norm(t - b)) < 1.0
         dirs = direction_of(found[0].ovps[:2], F, C)
         return angle_between_directions_deg(dirs, u[None, :]).min()
 
@@ -753,6 +756,32 @@ def test_an_outline_edge_whose_foot_stops_short_still_meets_its_leg():
     assert found(16.0, [[*raised, *(raised + [-60.0, 0.0])]], [V1]) == []
 
 
+def test_every_fewer_corner_rule_is_heard_and_the_taller_obstacle_drives_eta():
+    # Two rotated boxes and no corner pair: a low one on the left shows an outline edge with
+    # a leg at each end (edge_horizon_pairs), the taller one on the right a hidden-edge
+    # corner (junction_edge_pairs). Each rule finds its box; the first rule to find
+    # anything used to be the only one heard, so the low box drove η.
+    from companion.vision.obstacles import find_obstacles
+
+    segs_b, labels_b, faces_b = _bottom_of_box_with_unseen_front_edge()
+    a = np.radians(-20.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    foot = np.array([-1.6, 1.2, 5.0])
+    top = foot + [0.0, -0.5, 0.0]
+    f, t, f_u, t_v = _project([foot, top, foot + 0.7 * u, top + 0.7 * v])
+    segs = np.vstack([[[*f, *t], [*f, *f_u], [*t, *t_v]], segs_b])
+    labels = np.concatenate([[V3, NONE, NONE], labels_b])
+
+    found = find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                           labels)
+    assert len(found) == 2
+    assert found[0].height_px > found[1].height_px
+    for obstacle, faces in ((found[0], faces_b), (found[1], (u, v))):
+        dirs = direction_of(obstacle.ovps[:2], F, C)
+        for face in faces:
+            assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+
+
 def _face_of_rotated_box(yaw_deg=35.0):
     """One face of a tall box 4 m ahead, ``yaw_deg`` off the view: its two vertical edges
     and its top and bottom edges (the other face shows nothing). Returns the segments, the
@@ -826,9 +855,9 @@ def test_a_rug_side_aimed_at_the_cameras_foot_is_no_vertical_edge(x, width):
 
 def test_a_rug_dropped_as_edge_on_leaves_the_later_rules_to_find_the_table():
     # A rug's side aimed at the camera's foot, taken for a lone face (single_halves), and
-    # a table seen from the front, which only the last rule (hanging_faces) finds: the
-    # later rules run only when the earlier found nothing, and a rug dropped as edge-on
-    # at every corner counts as nothing.
+    # a table seen from the front, which only the last rule (hanging_faces) finds. Every
+    # rule runs when no corner pair is found; the rug, edge-on at every corner, is dropped
+    # and the table is what is left.
     from companion.vision.obstacles import ObstacleParams, find_obstacles
 
     rug, rug_labels = _rug_aimed_at_the_camera(1.2, 0.6)
@@ -841,8 +870,9 @@ def test_a_rug_dropped_as_edge_on_leaves_the_later_rules_to_find_the_table():
                               labels, params)
 
     kept = found(ObstacleParams(edge_on_deg=0.0))
-    assert len(kept) == 1
-    assert np.allclose(np.sort(kept[0].corners_px[:, 1]), np.sort(rug[0, [1, 3]]), atol=1.0)
+    assert len(kept) == 2
+    assert sum(np.allclose(np.sort(o.corners_px[:, 1]), np.sort(rug[0, [1, 3]]), atol=1.0)
+               for o in kept) == 1
     obstacles = found()
     assert len(obstacles) == 1
     assert np.abs(obstacles[0].corners_px[:, 1] - table[0, [1, 3]].mean()).max() < 10.0

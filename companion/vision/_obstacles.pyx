@@ -1574,7 +1574,10 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         edges = edge_legs(&fr, s, lengths, chains, free_idx, room_idx, &p)
         silhouette_halves(&fr, &p, s, lengths, lines, edges, manhattan_idx, &halves)
         pair_halves(&fr, &p, s, lines, &halves, &found)
-        # Step 0 is the above; then, while nothing is found, the fallbacks in turn.
+        # Step 0 is the above. When it finds nothing, every fallback runs and their
+        # hypotheses are grouped together (step 4): the obstacle that drives η is then
+        # chosen among all of them (find_obstacles' order), not taken from the first rule
+        # that found anything, which may be a weaker rule's wrong reading of another piece.
         for step in range(5):
             if step == 1:
                 edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
@@ -1585,7 +1588,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 single_halves(&fr, &p, &halves, &found)
             elif step == 4 and room_seen:
                 hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
-            if found.count == 0:
+            if found.count == 0 or 0 < step < 4:
                 continue
             obstacles = []
             for members in group_by_ovps(&found, p.merge_deg):

@@ -124,17 +124,20 @@ def find_obstacles(
     the room shows between the legs, so a top corner is not tested). A ``C_g`` at the
     edge's foot must have its legs on either side of the edge, as the bottom edges of a
     convex box's two faces in sight are; two on one side are a rug's or a shadow's.
-    When no pair is found this way, boxes that show fewer corners are looked for: leg
-    junctions one above the other; vertical edges with a leg at each end (at an end where
+    When no pair is found this way, boxes that show fewer corners are looked for, by
+    every one of these rules at once, their hypotheses grouped together: leg junctions one
+    above the other; vertical edges with a leg at each end (at an end where
     a room edge comes nearer than the leg, by more than ``noise_px``, on the leg's side,
     the end is a door frame's corner and the leg not the edge's); (with
     ``hidden_edge_corners``) two legs meeting where no vertical edge shows, neither seen
     edge-on there (``edge_on_deg``), on either side of the unseen edge, one of them
     running on to a vertical edge at its far end; a box showing one face; and last a
     face's top edge with vertical edges hanging from it (a table seen from the front, its
-    legs under the top). An obstacle edge-on at every corner (:func:`edge_on_angle_deg`
-    below ``edge_on_deg``) is dropped; when a step's obstacles are all dropped, the steps
-    after it run as if it had found nothing.
+    legs under the top). Taking the first rule that found anything instead let a weaker
+    rule's wrong reading (a face of an aligned box bent by the lens, a table read on the
+    wrong legs) hide another rule's reading of the obstacle. An obstacle edge-on at every
+    corner (:func:`edge_on_angle_deg` below ``edge_on_deg``) is dropped; when the pairs'
+    obstacles are all dropped, the other rules run as if none had been found.
 
     Inputs: ``segments`` N×4 pixels; ``corners`` already filtered by Table I;
     ``layout`` the frame's layout VPs; ``free`` N bool, segments that may be obstacle
