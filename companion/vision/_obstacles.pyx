@@ -1243,6 +1243,22 @@ def edge_on_angle(corners_px, ovps, layout_vps, double focal, double cx, double 
                          np.ascontiguousarray(ovps, dtype=float).reshape(-1, 3))
 
 
+cdef list kept_obstacles(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
+                         Hypotheses* found, double[:, ::1] pc, long long[::1] cs,
+                         long long[::1] cn, const double* v3_px):
+    """The obstacles of the hypotheses in ``found``, grouped by their OVPs
+    (:func:`group_by_ovps`, :func:`obstacle`), less those edge-on at every corner: a line
+    on the floor aimed at the camera's foot (:func:`edge_on_worst`)."""
+    obstacles = []
+    if found.count == 0:
+        return obstacles
+    for members in group_by_ovps(found, p.merge_deg):
+        o = obstacle(fr, p, s, lines, members, found, pc, cs, cn, v3_px)
+        if edge_on_worst(fr, o[1], o[0]) >= p.edge_on_deg:
+            obstacles.append(o)
+    return obstacles
+
+
 cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                     list members, Hypotheses* found, double[:, ::1] pc, long long[::1] cs,
                     long long[::1] cn, const double* v3_px):
@@ -1456,9 +1472,9 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
          double noise_px):
     """Obstacles from Table-I corners and vertical edges (see
     :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
-    corners_px K×2, pairs, height_px, λ3). The steps run in order, each only when the ones
-    before found nothing; an obstacle edge-on at every corner (:func:`edge_on_worst` below
-    ``edge_on_deg``) counts as nothing."""
+    corners_px K×2, pairs, height_px, λ3). The fewer-corner rules run, all of them, only
+    when the corner pairs found nothing; an obstacle edge-on at every corner
+    (:func:`edge_on_worst` below ``edge_on_deg``) counts as nothing."""
     cdef Params p
     p.collinear_px = params.collinear_px
     p.min_edge_px = params.min_edge_px
@@ -1478,7 +1494,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.noise_px = noise_px
     p.edge_on_deg = params.edge_on_deg
     cdef double[:, ::1] s = np.ascontiguousarray(segments, dtype=float).reshape(-1, 4)
-    cdef Py_ssize_t n = s.shape[0], i, k, g, nh, step
+    cdef Py_ssize_t n = s.shape[0], i, k, g, nh
     if n == 0:
         return []
     cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
@@ -1574,32 +1590,22 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         edges = edge_legs(&fr, s, lengths, chains, free_idx, room_idx, &p)
         silhouette_halves(&fr, &p, s, lengths, lines, edges, manhattan_idx, &halves)
         pair_halves(&fr, &p, s, lines, &halves, &found)
-        # Step 0 is the above. When it finds nothing, every fallback runs and their
-        # hypotheses are grouped together (step 4): the obstacle that drives η is then
-        # chosen among all of them (find_obstacles' order), not taken from the first rule
-        # that found anything, which may be a weaker rule's wrong reading of another piece.
-        for step in range(5):
-            if step == 1:
-                edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
-            elif step == 2 and p.hidden_edge_corners:
-                junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx,
-                                    &found)
-            elif step == 3 and room_seen:
-                single_halves(&fr, &p, &halves, &found)
-            elif step == 4 and room_seen:
-                hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
-            if found.count == 0 or 0 < step < 4:
-                continue
-            obstacles = []
-            for members in group_by_ovps(&found, p.merge_deg):
-                o = obstacle(&fr, &p, s, lines, members, &found, pc, cs, cn, &vps[2, 0])
-                # Edge-on at every corner: a line on the floor aimed at the camera's foot.
-                if edge_on_worst(&fr, o[1], o[0]) >= p.edge_on_deg:
-                    obstacles.append(o)
-            if obstacles:
-                return obstacles
-            found.count = 0
-        return []
+        # Step 0 is the above. When it finds nothing, every fewer-corner rule runs and
+        # their hypotheses are grouped together: the obstacle that drives η is then chosen
+        # among all of them (find_obstacles' order), not taken from the first rule that
+        # found anything, which may be a weaker rule's wrong reading of another piece.
+        obstacles = kept_obstacles(&fr, &p, s, lines, &found, pc, cs, cn, &vps[2, 0])
+        if obstacles:
+            return obstacles
+        found.count = 0
+        edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
+        if p.hidden_edge_corners:
+            junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx,
+                                &found)
+        if room_seen:
+            single_halves(&fr, &p, &halves, &found)
+            hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
+        return kept_obstacles(&fr, &p, s, lines, &found, pc, cs, cn, &vps[2, 0])
     finally:
         free(found.items)
         free(halves.items)
