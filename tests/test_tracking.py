@@ -125,3 +125,39 @@ def test_two_frames_agreeing_on_another_face_angle_take_over_from_a_coasting_tra
     out = _run([(20.0, 0.0), (20.0, 0.0), (-30.0, 0.0), (None, 2.0), (-28.0, 2.0)])
     assert out[3] == pytest.approx(22.0)  # still the old track, carried by the room
     assert out[4] == pytest.approx(-28.0)
+
+
+def test_a_piece_seen_beside_the_reported_one_is_confirmed_when_it_comes_to_drive_eta():
+    # Two pieces in view: the frames' best-supported obstacle is the one at 20° for two
+    # frames, with the one at −30° beside it, then the −30° one. Its track was measured in
+    # the frames before, so it is reported at once, where a track of the frame's obstacle
+    # alone would predict the 20° piece on while the newcomer waits for its second frame.
+    track, out = None, []
+    for eta, others in [(20.0, (-30.0,)), (20.2, (-30.4,)), (-30.2, (20.1,)), (-30.0, ())]:
+        track, tracked = update_track(track, eta, 0.0, others_deg=others)
+        out.append(tracked)
+    assert out[1] == pytest.approx(20.1)
+    assert out[2] == pytest.approx(-30.2, abs=0.11) and out[3] == pytest.approx(-30.1, abs=0.11)
+    # Without the piece beside it, the same frames coast the 20° track one frame.
+    assert _run([(20.0, 0.0), (20.2, 0.0), (-30.2, 0.0), (-30.0, 0.0)])[2] == pytest.approx(20.1)
+
+
+def test_a_confirmed_track_measured_beside_the_frames_obstacle_is_not_predicted():
+    # The reported piece is read beside a newcomer (a false alarm, seen once): the track is
+    # measured, so its η follows the measurement, not the room's prediction.
+    track = None
+    for eta in (20.0, 20.0):
+        track, _ = update_track(track, eta, 0.0)
+    track, tracked = update_track(track, -30.0, 0.0, others_deg=(22.0,))
+    assert tracked == pytest.approx(21.0)  # halfway to 22°; predicted it would be 20°
+    assert track.missed == 0
+
+
+def test_a_second_reading_of_one_obstacle_does_not_split_its_track():
+    # Two hypotheses of one box in a frame, 2° apart: one track, which the next frame's
+    # reading renews and reports, rather than a second track that the reading confirms.
+    track, _ = update_track(None, 20.0, 0.0)
+    track, _ = update_track(track, 20.4, 0.0, others_deg=(18.0,))
+    assert track.earlier == ()
+    track, tracked = update_track(track, 19.0, 0.0)
+    assert tracked == pytest.approx(19.6) and track.hits == 3

@@ -599,15 +599,17 @@ class Pipeline:
         ms["obstacles"] = (t4 - t3) * 1e3
 
         depth = self.depth_for(w)
+        headings = [heading_from_vp(o.ovps[:2][closest_to_centre(o.ovps[:2], centre)], centre,
+                                    depth) for o in obstacles]
         eta = phi = m = None
         pairs = 0
         if obstacles:
-            ovps = obstacles[0].ovps[:2]
-            hd = heading_from_vp(ovps[closest_to_centre(ovps, centre)], centre, depth)
-            eta, phi, m = hd.eta_deg, hd.phi_deg, hd.m_px
+            eta, phi, m = headings[0].eta_deg, headings[0].phi_deg, headings[0].m_px
             pairs = obstacles[0].pairs
-        self.track, eta_tracked = update_track(self.track, eta,
-                                               _room_eta(layout, centre, depth), pairs=pairs)
+        # Every obstacle of the frame keeps its own track; the first one's is reported.
+        self.track, eta_tracked = update_track(
+            self.track, eta, _room_eta(layout, centre, depth), pairs=pairs,
+            others_deg=tuple(hd.eta_deg for hd in headings[1:]))
         height = camera_height_m or self.config.camera.height_m
         contacts: tuple[tuple[FloorContact, ...], ...] = ()
         if obstacles and height and layout.observed[V3]:

@@ -1,4 +1,4 @@
-"""One obstacle followed across frames: η that does not flip, drop out or false-alarm.
+"""Obstacles followed across frames: η that does not flip, drop out or false-alarm.
 
 The paper estimates η frame by frame (eq. 10). A rotated obstacle standing in a Manhattan
 room has one thing that does not change while the vehicle yaws: its face's angle to the
@@ -28,7 +28,14 @@ room's four walls are each 90° apart). The track keeps that angle, so that
   ``max_missed`` frames, while the disagreeing detection waits beside it as an unconfirmed
   track: confirmed in turn, it takes over at once (two frames that agree on another face
   angle outweigh a prediction), so the tracked η follows the obstacle the frames now show
-  (another piece, or the real one after a false pair) without waiting out the coast.
+  (another piece, or the real one after a false pair) without waiting out the coast;
+- every obstacle of a frame keeps a track of its own, not only the one that drives the
+  frame's η (``find_obstacles``' first): a piece seen beside it is then already
+  confirmed when it comes to drive η, and is reported at once, and the reported track is
+  measured rather than predicted in a frame whose first obstacle is another. A second
+  reading of an obstacle the frame already measured (another hypothesis of one box, within
+  ``gate_deg``) starts no track. Only the frame's first obstacle decides which track is
+  reported.
 
 Inputs are plain values (the frame's η and the layout's η_room, degrees); the camera's
 yaw never has to be known, so a recording is tracked as well as a flight. Pure functions;
@@ -71,9 +78,10 @@ class Track:
     """``rel_deg``: the obstacle face's angle to the room axes, (−45°, 45°];
     ``eta_deg``: the tracked η it gave in the last frame (on the OVP eq. 9 follows);
     ``hits``: consistent detections so far; ``missed``: frames since the last one;
-    ``earlier``: unconfirmed tracks of the last frames that this one disagreed with, each
-    still waiting for its second frame (``TrackParams.confirm_window``); the first to get
-    it replaces this one."""
+    ``earlier``: the other tracks, kept beside this one (the one reported): obstacles the
+    frames read as another face angle, as the frame's obstacle or beside it, each
+    confirmed or still waiting for its second frame (``TrackParams.confirm_window``). The
+    frame's obstacle replaces this one as soon as its track is confirmed."""
 
     rel_deg: float
     eta_deg: float
@@ -96,62 +104,94 @@ def update_track(
     eta_room_deg: float | None,
     params: TrackParams | None = None,
     pairs: int = 1,
+    others_deg: tuple[float, ...] = (),
 ) -> tuple[Track | None, float | None]:
     """One frame: the new track and the tracked η in degrees (None: nothing to report).
 
     ``eta_deg``: this frame's η (eq. 10), None without a detection; ``eta_room_deg``: eq. 10
-    of a horizontal layout VP, None when the layout was not seen (the track then holds its
-    last η while it lasts); ``pairs``: the corner pairs the detection rests on.
+    of a horizontal layout VP, None when the layout was not seen (the tracks then hold
+    their last η while they last); ``pairs``: the corner pairs the detection rests on;
+    ``others_deg``: η of the frame's other obstacles, best supported first. Each obstacle
+    of the frame keeps a track of its own (the nearest within ``gate_deg``, each track
+    taken once), so a piece seen beside the one that drives η is already confirmed when
+    it comes to drive it, and the reported track is measured, not predicted, while the
+    frame's first obstacle is another. Only the frame's first obstacle decides which track
+    is reported.
     """
     p = params or TrackParams()
-    if eta_deg is not None and eta_room_deg is not None:
-        rel = wrap90(eta_deg - eta_room_deg)
-        # The track, and the unconfirmed ones still waiting before or beside it.
-        waiting = () if track is None else (track, *track.earlier)
-
-        def gap(t: Track) -> float:
-            return abs(wrap90(rel - t.rel_deg))
-
-        t = min(waiting, key=gap, default=None)
-        if t is not None and gap(t) <= p.gate_deg:
-            # The same obstacle: keep the OVP being followed unless the other one is
-            # clearly nearer the centre.
-            kept = _nearest_branch(eta_deg, t.eta_deg)
-            branch = eta_deg if abs(eta_deg) + p.switch_margin_deg < abs(kept) else kept
-            new_rel = wrap90(t.rel_deg + p.smoothing * wrap90(rel - t.rel_deg))
-            eta = _nearest_branch(new_rel + eta_room_deg, branch)
-            track = Track(new_rel, eta, t.hits + 1, 0)
-        elif track is not None and track.confirmed(p) and track.missed < p.max_missed:
-            # Another obstacle, a false alarm, or this track was the false one: it is
-            # predicted on, and the newcomer waits beside it for a second frame.
-            coasting, eta = _predict(track, eta_room_deg, p)
-            return replace(coasting, earlier=(Track(rel, eta_deg), *coasting.earlier)), eta
+    if eta_deg is None or eta_room_deg is None:
+        if track is None:
+            return None, None
+        return _predict(track, eta_room_deg, p)
+    tracks = () if track is None else (track, *track.earlier)
+    measured: dict[int, Track] = {}  # index into tracks -> the track a detection renewed
+    newcomers: list[Track] = []
+    primary: Track | None = None
+    for k, eta in enumerate((eta_deg, *others_deg)):
+        rel = wrap90(eta - eta_room_deg)
+        free = [i for i in range(len(tracks)) if i not in measured]
+        i = min(((_gap(rel, tracks[j]), j) for j in free), default=(0.0, None))[1]
+        if i is not None and _gap(rel, tracks[i]) <= p.gate_deg:
+            measured[i] = renewed = _renew(tracks[i], rel, eta, eta_room_deg, p)
+        elif k and any(_gap(rel, t) <= p.gate_deg for t in (*measured.values(), *newcomers)):
+            continue  # another reading of an obstacle this frame already measured
         else:
-            track = Track(rel, eta_deg, earlier=_waiting(waiting, p))
-        measured_twice = 0 < p.report_pairs <= pairs
-        return track, (track.eta_deg if track.confirmed(p) or measured_twice else None)
-    if track is None:
-        return None, None
-    return _predict(track, eta_room_deg, p)
+            renewed = Track(rel, eta)
+            newcomers.append(renewed)
+        if k == 0:
+            primary = renewed
+    after = [measured.get(i) or _aged(t, eta_room_deg, p) for i, t in enumerate(tracks)]
+    old = after[0] if tracks else None  # the reported track, this frame (None: ended)
+    # The frame's obstacle is reported once confirmed (or seen twice in the frame), unless
+    # a confirmed track goes on beside it, measured beside it or predicted.
+    reportable = old is not None and old.confirmed(p)
+    main = old if reportable and not primary.confirmed(p) else primary
+    # Two corner pairs of one frame that agree are two measurements, as two frames are.
+    confirmed = main.confirmed(p) or (main is primary and 0 < p.report_pairs <= pairs)
+    rest = tuple(t for t in (*after, *newcomers) if t is not None and t is not main)
+    main = replace(main, earlier=rest)
+    return main, (main.eta_deg if confirmed else None)
 
 
-def _waiting(tracks: tuple[Track, ...], p: TrackParams) -> tuple[Track, ...]:
-    """Unconfirmed ``tracks`` a frame older: each waits through at most ``confirm_window
-    − confirm_hits`` frames without it (the defaults: one)."""
-    return tuple(replace(t, missed=t.missed + 1, earlier=()) for t in tracks
-                 if not t.confirmed(p) and t.missed < p.confirm_window - p.confirm_hits)
+def _gap(rel_deg: float, t: Track) -> float:
+    """How far a face angle ``rel_deg`` is from track ``t``'s, degrees, modulo 90°."""
+    return abs(wrap90(rel_deg - t.rel_deg))
+
+
+def _renew(t: Track, rel: float, eta_deg: float, eta_room_deg: float, p: TrackParams) -> Track:
+    """Track ``t`` measured again at face angle ``rel`` (η ``eta_deg``): its angle moves
+    by ``smoothing`` of the difference, and eq. 9's OVP it follows is kept unless the other
+    one is clearly nearer the centre."""
+    kept = _nearest_branch(eta_deg, t.eta_deg)
+    branch = eta_deg if abs(eta_deg) + p.switch_margin_deg < abs(kept) else kept
+    new_rel = wrap90(t.rel_deg + p.smoothing * wrap90(rel - t.rel_deg))
+    return Track(new_rel, _nearest_branch(new_rel + eta_room_deg, branch), t.hits + 1, 0)
+
+
+def _aged(t: Track, eta_room_deg: float | None, p: TrackParams) -> Track | None:
+    """Track ``t`` a frame without a detection of its own: a confirmed one predicted from
+    the room for up to ``max_missed`` frames, an unconfirmed one waiting through at most
+    ``confirm_window − confirm_hits`` (the defaults: one); else None."""
+    if t.confirmed(p):
+        if t.missed >= p.max_missed:
+            return None
+        eta = t.eta_deg
+        if eta_room_deg is not None:
+            eta = _nearest_branch(t.rel_deg + eta_room_deg, t.eta_deg)
+        return Track(t.rel_deg, eta, t.hits, t.missed + 1)
+    if t.missed >= p.confirm_window - p.confirm_hits:
+        return None
+    return Track(t.rel_deg, t.eta_deg, t.hits, t.missed + 1)
 
 
 def _predict(track: Track, eta_room_deg: float | None, p: TrackParams
              ) -> tuple[Track | None, float | None]:
-    """A frame without a consistent detection: predict from the room, or drop the track
-    (an unconfirmed one waits on, unreported, while it can still be confirmed; so do the
-    newcomers waiting beside a confirmed one)."""
-    if not track.confirmed(p) or track.missed >= p.max_missed:
-        waiting = _waiting((track, *track.earlier), p)  # a confirmed track is not among them
-        return (replace(waiting[0], earlier=waiting[1:]) if waiting else None), None
-    eta = track.eta_deg
-    if eta_room_deg is not None:
-        eta = _nearest_branch(track.rel_deg + eta_room_deg, track.eta_deg)
-    track = Track(track.rel_deg, eta, track.hits, track.missed + 1, _waiting(track.earlier, p))
-    return track, eta
+    """A frame without a detection: every track predicted from the room, or dropped. The
+    reported track goes on while it lasts; after it, the first confirmed track left, else
+    the first one waiting (unreported)."""
+    kept = [t for t in (_aged(t, eta_room_deg, p) for t in (track, *track.earlier)) if t]
+    if not kept:
+        return None, None
+    main = next((t for t in kept if t.confirmed(p)), kept[0])
+    main = replace(main, earlier=tuple(t for t in kept if t is not main))
+    return main, (main.eta_deg if main.confirmed(p) else None)
