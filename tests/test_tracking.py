@@ -158,6 +158,6 @@ def test_a_second_reading_of_one_obstacle_does_not_split_its_track():
     # reading renews and reports, rather than a second track that the reading confirms.
     track, _ = update_track(None, 20.0, 0.0)
     track, _ = update_track(track, 20.4, 0.0, others_deg=(18.0,))
-    assert track.earlier == ()
+    assert track.beside == ()
     track, tracked = update_track(track, 19.0, 0.0)
     assert tracked == pytest.approx(19.6) and track.hits == 3

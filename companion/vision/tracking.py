@@ -78,7 +78,7 @@ class Track:
     """``rel_deg``: the obstacle face's angle to the room axes, (−45°, 45°];
     ``eta_deg``: the tracked η it gave in the last frame (on the OVP eq. 9 follows);
     ``hits``: consistent detections so far; ``missed``: frames since the last one;
-    ``earlier``: the other tracks, kept beside this one (the one reported): obstacles the
+    ``beside``: the other tracks, kept beside this one (the one reported): obstacles the
     frames read as another face angle, as the frame's obstacle or beside it, each
     confirmed or still waiting for its second frame (``TrackParams.confirm_window``). The
     frame's obstacle replaces this one as soon as its track is confirmed."""
@@ -87,7 +87,7 @@ class Track:
     eta_deg: float
     hits: int = 1
     missed: int = 0
-    earlier: tuple[Track, ...] = ()
+    beside: tuple[Track, ...] = ()
 
     def confirmed(self, params: TrackParams) -> bool:
         return self.hits >= params.confirm_hits
@@ -123,7 +123,7 @@ def update_track(
         if track is None:
             return None, None
         return _predict(track, eta_room_deg, p)
-    tracks = () if track is None else (track, *track.earlier)
+    tracks = () if track is None else (track, *track.beside)
     measured: dict[int, Track] = {}  # index into tracks -> the track a detection renewed
     newcomers: list[Track] = []
     primary: Track | None = None
@@ -149,7 +149,7 @@ def update_track(
     # Two corner pairs of one frame that agree are two measurements, as two frames are.
     confirmed = main.confirmed(p) or (main is primary and 0 < p.report_pairs <= pairs)
     rest = tuple(t for t in (*after, *newcomers) if t is not None and t is not main)
-    main = replace(main, earlier=rest)
+    main = replace(main, beside=rest)
     return main, (main.eta_deg if confirmed else None)
 
 
@@ -189,9 +189,9 @@ def _predict(track: Track, eta_room_deg: float | None, p: TrackParams
     """A frame without a detection: every track predicted from the room, or dropped. The
     reported track goes on while it lasts; after it, the first confirmed track left, else
     the first one waiting (unreported)."""
-    kept = [t for t in (_aged(t, eta_room_deg, p) for t in (track, *track.earlier)) if t]
+    kept = [t for t in (_aged(t, eta_room_deg, p) for t in (track, *track.beside)) if t]
     if not kept:
         return None, None
     main = next((t for t in kept if t.confirmed(p)), kept[0])
-    main = replace(main, earlier=tuple(t for t in kept if t is not main))
+    main = replace(main, beside=tuple(t for t in kept if t is not main))
     return main, (main.eta_deg if main.confirmed(p) else None)
