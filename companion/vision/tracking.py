@@ -44,6 +44,7 @@ yaw never has to be known, so a recording is tracked as well as a flight. Pure f
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 __all__ = ["TrackParams", "Track", "wrap90", "update_track"]
@@ -129,9 +130,9 @@ def update_track(
     primary: Track | None = None
     for k, eta in enumerate((eta_deg, *others_deg)):
         rel = wrap90(eta - eta_room_deg)
-        free = [i for i in range(len(tracks)) if i not in measured]
-        i = min(((_gap(rel, tracks[j]), j) for j in free), default=(0.0, None))[1]
-        if i is not None and _gap(rel, tracks[i]) <= p.gate_deg:
+        gap, i = min(((_gap(rel, t), i) for i, t in enumerate(tracks) if i not in measured),
+                     default=(math.inf, None))
+        if gap <= p.gate_deg:
             measured[i] = renewed = _renew(tracks[i], rel, eta, eta_room_deg, p)
         elif k and any(_gap(rel, t) <= p.gate_deg for t in (*measured.values(), *newcomers)):
             continue  # another reading of an obstacle this frame already measured
