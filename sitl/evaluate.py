@@ -51,6 +51,7 @@ import cv2
 import numpy as np
 
 from companion.config import Config
+from companion.vision.obstacles import RULES
 from companion.vision.pipeline import Pipeline
 from sitl.scene import (
     RENDERERS,
@@ -131,6 +132,7 @@ class SceneResult:
     focal_est_px: float | None = None  # the focal length the pipeline used (given or estimated)
     focal_true_px: float | None = None
     eye_level: bool = False  # not detectable only because its top is seen edge-on
+    rule: str | None = None  # the rule that read the obstacle driving η (Obstacle.rule)
 
 
 def _eta_figures(seen: list[SceneResult]) -> dict[str, float | int | None]:
@@ -190,6 +192,7 @@ class EvalReport:
             **eye,
             **self.focal_figures(),
             **self.kind_figures(),
+            **self.rule_figures(),
             **self.range_figures(),
         }
 
@@ -209,6 +212,18 @@ class EvalReport:
             out[f"detectable_{r.kind}"] = out.get(f"detectable_{r.kind}", 0) + 1
             out[f"detected_{r.kind}"] = (out.get(f"detected_{r.kind}", 0)
                                          + (r.eta_est_deg is not None))
+        return out
+
+    def rule_figures(self) -> dict[str, int]:
+        """Detections and false alarms by the rule that read the obstacle driving η
+        (:data:`~companion.vision.obstacles.RULES`): ``rule_detected_<rule>``,
+        ``rule_false_<rule>`` (spaces as underscores), for every rule that read any."""
+        out: dict[str, int] = {}
+        for r in self._pick(lambda r: r.rule and (r.detectable or not r.has_obstacle)):
+            rule = r.rule.replace(" ", "_")
+            for key in (f"rule_detected_{rule}", f"rule_false_{rule}"):
+                out.setdefault(key, 0)
+            out[f"rule_detected_{rule}" if r.detectable else f"rule_false_{rule}"] += 1
         return out
 
     def range_figures(self) -> dict[str, float | int | None]:
@@ -403,6 +418,7 @@ def _scene_result(index: int, view: View, image: np.ndarray, truth: SceneTruth,
         focal_est_px=est.focal_px,
         focal_true_px=truth.focal_px,
         eye_level=bool(edge_on) and not detectable,
+        rule=est.obstacles[0].rule if est.obstacles else None,
     )
 
 
@@ -471,6 +487,14 @@ def run_eval(
     return EvalReport(scenes=scenes, seed=seed, results=in_item_order(order, results))
 
 
+def _by_rule(f: dict) -> str:
+    """``rule detections/false alarms, …`` of :meth:`EvalReport.rule_figures`, in the
+    order of :data:`~companion.vision.obstacles.RULES`; ``none`` when no rule read any."""
+    keys = [(r, r.replace(" ", "_")) for r in RULES]
+    return ", ".join(f"{r} {f['rule_detected_' + k]}/{f['rule_false_' + k]}"
+                     for r, k in keys if f"rule_detected_{k}" in f) or "none"
+
+
 def format_report(report: EvalReport) -> list[str]:
     """The figures as printable lines, each with its target."""
     f = report.figures()
@@ -505,6 +529,8 @@ def format_report(report: EvalReport) -> list[str]:
         + "   target <= 8 % of the diagonal (paper: 9.98 % on LSUN)"
         + mark("corner_err_pct"),
         f"pipeline latency median {f['latency_ms_median']:.1f} ms per frame",
+        f"by the rule that read the obstacle driving η, detections / false alarms: "
+        f"{_by_rule(f)}",
     ]
 
 
@@ -644,6 +670,10 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
         kinds = sorted(k.removeprefix("detectable_") for k in f if k.startswith("detectable_"))
         lines.append(f"  {label:<14} {split:<5} " + ", ".join(
             f"{k} {f['detected_' + k]}/{f['detectable_' + k]}" for k in kinds))
+    lines.append("η returned, by the rule that read the obstacle driving it: detections / "
+                 "false alarms:")
+    for label, split, f in figures:
+        lines.append(f"  {label:<14} {split:<5} {_by_rule(f)}")
     lines.append("range to the obstacle's floor contact (camera height given), relative error "
                  "median / p90, measured, too far by > 20 %:")
     for label, split, f in figures:

@@ -113,6 +113,8 @@ class FrameChange:
     old_eta_deg: float | None
     new_eta_deg: float | None
     view: str = AS_DRAWN
+    old_rule: str | None = None  # the rule that read the obstacle driving η, in each run
+    new_rule: str | None = None
 
     @property
     def old_err_deg(self) -> float | None:
@@ -159,7 +161,8 @@ def frame_changes(old: list[dict], new: list[dict], eta_tol_deg: float = 1.0
         if what:
             changes.append(FrameChange(r["renderer"], r["split"], r["seed"], r["camera"],
                                        r["index"], r["mirrored"], what, r.get("kind"),
-                                       r["eta_true_deg"], was, now, r["view"]))
+                                       r["eta_true_deg"], was, now, r["view"],
+                                       o.get("rule"), r.get("rule")))
     return changes, shared
 
 
@@ -194,6 +197,8 @@ def format_changes(changes: list[FrameChange], shared: int, eta_tol_deg: float =
             err = ""
             if c.what == "eta":
                 err = f"  error {c.old_err_deg:.1f}° → {c.new_err_deg:.1f}°"
+            if c.old_rule or c.new_rule:
+                err += f"  by {c.old_rule or '—'} → {c.new_rule or '—'}"
             lines.append(f"  {frame:<14} {c.what:<17} {c.kind or '':<8} true {deg(c.eta_true_deg)}"
                          f"  η {deg(c.old_eta_deg)} → {deg(c.new_eta_deg)}{err}")
     return lines

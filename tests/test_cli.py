@@ -289,7 +289,8 @@ def test_eval_prints_figures(tmp_path):
     js = tmp_path / "fig.json"
     r = run("eval", "--scenes", "3", "--workers", "1", "--json", js, timeout=300)
     assert r.returncode == 0, r.stderr
-    for name in ("η error median", "detection rate", "false-positive rate", "corner error"):
+    for name in ("η error median", "detection rate", "false-positive rate", "corner error",
+                 "by the rule that read the obstacle driving η"):
         assert name in r.stdout
     fig = json.loads(js.read_text())
     assert fig["scenes"] == 3

@@ -8,10 +8,12 @@ from sitl.evaluate import SceneResult
 from sitl.frames import format_changes, frame_changes, frame_rows, read_frames, reading_of, view_of
 
 
-def result(index, eta_est, eta_true=30.0, detectable=True, has_obstacle=True, mirrored=False):
+def result(index, eta_est, eta_true=30.0, detectable=True, has_obstacle=True, mirrored=False,
+           rule=None):
     return SceneResult(index=index, has_obstacle=has_obstacle, detectable=detectable,
                        eta_true_deg=eta_true if has_obstacle else None, eta_est_deg=eta_est,
-                       corner_err_pct=None, latency_ms=3.0, mirrored=mirrored, kind="box")
+                       corner_err_pct=None, latency_ms=3.0, mirrored=mirrored, kind="box",
+                       rule=rule)
 
 
 def rows(results, camera="640×480, 90°"):
@@ -65,6 +67,22 @@ def test_written_rows_read_back_and_format_one_line_per_change(tmp_path):
     assert lines[1] == "640×480, 90°, pathtraced dev: 1 gained"
     assert lines[2].split()[:2] == ["3", "gained"]
     assert len(lines) == 3
+
+
+def test_a_changed_frame_says_which_rule_read_it_in_each_run():
+    old = rows([result(3, None), result(4, 30.0, rule="corner pair"),
+                result(5, None, has_obstacle=False, detectable=False)])
+    new = rows([result(3, 31.0, rule="hidden edge"), result(4, 36.0, rule="one face"),
+                result(5, -8.0, has_obstacle=False, detectable=False, rule="single corner")])
+    lines = format_changes(*frame_changes(old, new))
+    by_frame = {line.split()[0]: line for line in lines[2:]}
+    assert by_frame["3"].endswith("by — → hidden edge")
+    assert by_frame["4"].endswith("by corner pair → one face")
+    assert by_frame["5"].endswith("by — → single corner")
+    # Rows written before rows had a rule read as they did.
+    for row in old + new:
+        del row["rule"]
+    assert all(" by " not in line for line in format_changes(*frame_changes(old, new))[2:])
 
 
 def test_a_line_that_is_not_a_frame_row_is_named(tmp_path):

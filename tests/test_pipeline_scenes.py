@@ -9,12 +9,14 @@ from companion.config import Config
 from companion.vision.geometry import direction_of, principal_point
 from companion.vision.pipeline import STAGES, Pipeline
 from sitl.evaluate import (
+    CAMERAS,
     EvalReport,
     SceneResult,
     View,
     draw_scene,
     evaluate_scene,
     evaluate_video,
+    format_splits,
 )
 from sitl.sample import sample_scene
 from sitl.scene import (
@@ -303,6 +305,29 @@ def test_the_report_counts_detections_by_kind_and_the_focal_lengths_error():
     assert (f["detected_box"], f["detectable_box"]) == (1, 1)
     assert f["focal_err_median"] == pytest.approx(0.05)  # of 0, 0.2 and 0.05
     assert f["focal_err_p90"] == pytest.approx(0.17)
+
+
+def test_the_report_counts_detections_and_false_alarms_by_rule():
+    def result(detectable, has_obstacle, rule):
+        return SceneResult(index=0, has_obstacle=has_obstacle, detectable=detectable,
+                           eta_true_deg=20.0 if has_obstacle else None,
+                           eta_est_deg=None if rule is None else 20.5, corner_err_pct=None,
+                           latency_ms=1.0, rule=rule)
+
+    report = EvalReport(6, 0, [
+        result(True, True, "corner pair"), result(True, True, "corner pair"),
+        result(True, True, "one face"), result(False, False, "one face"),
+        result(True, True, None),                 # missed: no rule
+        result(False, True, "hidden edge"),       # an obstacle not detectable: neither
+    ])
+    f = report.figures()
+    assert (f["rule_detected_corner_pair"], f["rule_false_corner_pair"]) == (2, 0)
+    assert (f["rule_detected_one_face"], f["rule_false_one_face"]) == (1, 1)
+    assert not any("hidden_edge" in k for k in f)
+    lines = format_splits("scene", {"dev": {label: report for label, *_ in CAMERAS}})
+    below = lines[next(i for i, x in enumerate(lines) if x.startswith("η returned")) + 1]
+    assert below.split() == [*CAMERAS[0][0].split(), "dev", "corner", "pair", "2/0,", "one",
+                             "face", "1/1"]
 
 
 def test_a_lower_edge_threshold_finds_a_faint_edge():

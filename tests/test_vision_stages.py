@@ -415,7 +415,7 @@ def test_obstacle_from_two_leg_corners_of_its_outline():
     assert not table1_mask(corners, labels, obstacle_legs(labels, labels)).any()  # no 3-leg corner
     found = find_obstacles(segs, corners.take(np.zeros(len(corners), bool)), layout,
                            labels == NONE, labels)
-    assert len(found) == 1
+    assert len(found) == 1 and found[0].rule == "leg junctions"
     ovp_dirs = direction_of(found[0].ovps[:2], F, C)
     for face in faces:
         assert angle_between_directions_deg(ovp_dirs, face[None, :]).min() < 0.5
@@ -512,11 +512,40 @@ def test_a_corner_whose_far_end_shows_no_leg_takes_its_ovps_on_the_horizon():
     assert len(corners) == 1
     found = find_obstacles(segs, corners, layout, labels == NONE, labels)
     assert len(found) == 1 and found[0].pairs == 1
+    assert found[0].rule == "single corner"
     for ovp in found[0].ovps[:2]:
         assert to_pixels(ovp)[1] == pytest.approx(C[1], abs=1e-6)
     dirs = direction_of(found[0].ovps[:2], F, C)
     for face in (u, v):
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 1e-6
+
+
+def test_a_corner_pair_names_the_papers_rule_and_a_lone_corner_its_own():
+    # The box above with its bottom legs in sight too: the far end of the vertical edge
+    # shows two legs, the paper's pair (eqs. 5–8). Each obstacle names the rule that read
+    # it, so an evaluation can count detections and false alarms by rule.
+    from companion.vision.obstacles import find_obstacles
+
+    a = np.radians(35.0)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    front = np.array([0.2, 1.2, 4.0])
+    top = front + [0.0, -0.5, 0.0]
+    b, t, t_u, t_v, b_u, b_v = _project([front, top, top + 0.8 * u, top + 0.8 * v,
+                                         front + 0.8 * u, front + 0.8 * v])
+    segs = np.array([[*t, *t_u], [*t, *t_v], [*b, *t], [*b, *b_u], [*b, *b_v]])
+    labels = np.array([NONE, NONE, V3, NONE, NONE])
+
+    def found(segs, labels):
+        return find_obstacles(segs, find_corners(segs, labels), _room_layout(),
+                              labels == NONE, labels)
+
+    pair = found(segs, labels)
+    assert len(pair) == 1 and pair[0].rule == "corner pair"
+    dirs = direction_of(pair[0].ovps[:2], F, C)
+    for face in (u, v):
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+    lone = found(segs[:3], labels[:3])  # no leg at the foot: the top corner alone
+    assert len(lone) == 1 and lone[0].rule == "single corner"
 
 
 def test_a_right_angle_that_a_pixel_of_noise_decides_is_no_box():
@@ -641,7 +670,7 @@ def test_an_unseen_vertical_edge_is_implied_by_leg_junctions_above_each_other():
     no_corners = find_corners(segs, labels)
     assert len(no_corners) == 0
     found = find_obstacles(segs, no_corners, _room_layout(), labels == NONE, labels)
-    assert len(found) == 1
+    assert len(found) == 1 and found[0].rule == "leg junctions"
     dirs = direction_of(found[0].ovps[:2], F, C)
     for face in (u, v):
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
@@ -693,7 +722,7 @@ def test_a_box_corner_whose_own_edge_is_unseen_rests_on_the_outline_edge_of_a_le
     corners = find_corners(segs, labels)
     assert len(corners) == 0  # no corner has its three legs
     found = find_obstacles(segs, corners, _room_layout(), labels == NONE, labels)
-    assert len(found) == 1
+    assert len(found) == 1 and found[0].rule == "hidden edge"
     dirs = direction_of(found[0].ovps[:2], F, C)
     for face in faces:
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
@@ -776,6 +805,7 @@ def test_every_fewer_corner_rule_is_heard_and_the_taller_obstacle_drives_eta():
                            labels)
     assert len(found) == 2
     assert found[0].height_px > found[1].height_px
+    assert [o.rule for o in found] == ["hidden edge", "edge legs"]
     for obstacle, faces in ((found[0], faces_b), (found[1], (u, v))):
         dirs = direction_of(obstacle.ovps[:2], F, C)
         for face in faces:
@@ -801,7 +831,7 @@ def test_a_box_showing_one_face_takes_the_other_ovp_at_a_right_angle():
     labels = np.array([V3, V3, NONE, NONE])
     found = find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
                            labels)
-    assert len(found) == 1
+    assert len(found) == 1 and found[0].rule == "one face"
     dirs = direction_of(found[0].ovps[:2], F, C)
     for face in (u, v):  # the seen face's OVP, and the other at a right angle on the horizon
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
@@ -1189,7 +1219,7 @@ def test_a_table_seen_from_the_front_hangs_its_legs_from_its_top_edge():
                               labels == NONE, labels)
 
     obstacles = found(segs, labels)
-    assert len(obstacles) == 1
+    assert len(obstacles) == 1 and obstacles[0].rule == "hanging face"
     dirs = direction_of(obstacles[0].ovps[:2], F, C)
     for face in (u, v):  # the top edge's OVP, and the other at a right angle on the horizon
         assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5

@@ -27,6 +27,14 @@ from companion.vision._geometry cimport (
 cdef double INF = float("inf")
 cdef double MIN_SIDE = sin(radians(20.0))  # a leg leaves its vertical edge at 20° or more
 
+# The rules an obstacle hypothesis comes from, in find_obstacles' order (a diagnosis: which
+# rule read each detection and each false alarm).
+cdef enum:
+    CORNER_PAIR, SINGLE_CORNER, LEG_JUNCTIONS, TWO_FACES, EDGE_LEGS, HIDDEN_EDGE, ONE_FACE, \
+        HANGING_FACE
+RULES = ("corner pair", "single corner", "leg junctions", "two faces", "edge legs",
+         "hidden edge", "one face", "hanging face")
+
 
 cdef struct Params:
     double collinear_px
@@ -72,6 +80,7 @@ cdef struct Hypothesis:
     int nlegs
     double points[8]
     int npoints
+    int rule  # which rule of find_obstacles made it: an index into RULES
 
 
 cdef struct Hypotheses:
@@ -80,7 +89,7 @@ cdef struct Hypotheses:
     Py_ssize_t cap
 
 
-cdef Hypothesis* new_hypothesis(Hypotheses* hs) except NULL:
+cdef Hypothesis* new_hypothesis(Hypotheses* hs, int rule) except NULL:
     cdef Hypothesis* grown
     if hs.count == hs.cap:
         hs.cap = max(16, 2 * hs.cap)
@@ -93,6 +102,7 @@ cdef Hypothesis* new_hypothesis(Hypotheses* hs) except NULL:
     h.corner = -1
     h.nlegs = 0
     h.npoints = 0
+    h.rule = rule
     return h
 
 
@@ -630,7 +640,7 @@ cdef void silhouette_halves(Frame* fr, Params* p, double[:, ::1] s, double[::1] 
                     continue
                 if room_leg_nearer(p, s, lengths, manhattan_idx, chain, ka, kb, o, o):
                     continue
-                h = new_hypothesis(halves)
+                h = new_hypothesis(halves, ONE_FACE)
                 h.d1[0], h.d1[1], h.d1[2] = d[0], d[1], d[2]
                 h.edge = chain[4]
                 h.legs[0], h.legs[1] = ka, kb
@@ -683,7 +693,7 @@ cdef void pair_halves(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lin
                     continue
                 for k in range(3):
                     d1[k], d2[k] = a.d1[k], b.d1[k]
-            h = new_hypothesis(found)
+            h = new_hypothesis(found, TWO_FACES)
             set_ovps(h, d1, d2, lam, a.edge if a.edge > b.edge else b.edge)
             h.nlegs = 4
             h.legs[0], h.legs[1], h.legs[2], h.legs[3] = a.legs[0], a.legs[1], b.legs[0], b.legs[1]
@@ -741,7 +751,7 @@ cdef void single_halves(Frame* fr, Params* p, Hypotheses* halves, Hypotheses* fo
         cross3(fr.d3, a.d1, d2)
         if unit3(d2) <= 0:
             continue
-        h = new_hypothesis(found)  # grows ``found``; ``a`` points into ``halves``
+        h = new_hypothesis(found, ONE_FACE)  # grows ``found``; ``a`` points into ``halves``
         set_ovps(h, a.d1, d2, horizon_error(fr, a.d1), a.edge)
         h.legs[0], h.legs[1] = a.legs[0], a.legs[1]
         h.nlegs = 2
@@ -793,7 +803,7 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] s, double[::1]
                 best_a, best_b = ka, kb
         if best == INF:
             continue
-        h = new_hypothesis(found)
+        h = new_hypothesis(found, EDGE_LEGS)
         set_ovps(h, b1, b2, best, chain[4])
         h.legs[0], h.legs[1] = best_a, best_b
         h.nlegs = 2
@@ -862,7 +872,7 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                     continue
                 if room_edge_at(s, lengths, chain, room_idx, o1, o2, p):
                     continue
-                h = new_hypothesis(found)
+                h = new_hypothesis(found, HIDDEN_EDGE)
                 set_ovps(h, d1, d2, ortho, chain[4])
                 h.legs[0], h.legs[1] = a, b
                 h.nlegs = 2
@@ -1004,7 +1014,7 @@ cdef void junction_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] 
             direction_of(fr, o2, d2)
             if not box_ovps(fr, p, d1, d2, &lam):
                 continue
-            h = new_hypothesis(found)
+            h = new_hypothesis(found, LEG_JUNCTIONS)
             set_ovps(h, d1, d2, lam, length)
             h.legs[0], h.legs[1], h.legs[2], h.legs[3] = legs_a[0], legs_b[0], legs_a[1], legs_b[1]
             h.nlegs = 4
@@ -1263,7 +1273,8 @@ cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines
                     list members, Hypotheses* found, double[:, ::1] pc, long long[::1] cs,
                     long long[::1] cn, const double* v3_px):
     """One obstacle from a group of hypotheses: OVPs refit on all legs, member corners
-    joined. Returns (ovps 3×3, corners_px K×2, pairs, height_px, λ3)."""
+    joined. Returns (ovps 3×3, corners_px K×2, pairs, height_px, λ3, rule): ``rule`` the
+    name (:data:`RULES`) of the rule that made the group's first hypothesis."""
     cdef Hypothesis* first = &found.items[<Py_ssize_t>members[0]]
     cdef Hypothesis* h
     cdef double ref1[3]
@@ -1330,7 +1341,8 @@ cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines
             points.append((x, y))
     ovps = np.array([[o1[0], o1[1], o1[2]], [o2[0], o2[1], o2[2]],
                      [v3_px[0], v3_px[1], v3_px[2]]])
-    return ovps, np.array(points, dtype=float).reshape(-1, 2), len(members), height, lam3
+    return (ovps, np.array(points, dtype=float).reshape(-1, 2), len(members), height, lam3,
+            RULES[first.rule])
 
 
 cdef bint room_edge_under(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1] room_idx,
@@ -1445,7 +1457,7 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
         cross3(fr.d3, d1, d2)
         if unit3(d2) <= 0:
             continue
-        h = new_hypothesis(found)
+        h = new_hypothesis(found, HANGING_FACE)
         set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
         h.legs[0] = a
         h.nlegs = 1
@@ -1472,8 +1484,8 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
          double noise_px):
     """Obstacles from Table-I corners and vertical edges (see
     :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
-    corners_px K×2, pairs, height_px, λ3). The fewer-corner rules run, all of them, only
-    when the corner pairs found nothing; an obstacle edge-on at every corner
+    corners_px K×2, pairs, height_px, λ3, rule). The fewer-corner rules run, all of them,
+    only when the corner pairs found nothing; an obstacle edge-on at every corner
     (:func:`edge_on_worst` below ``edge_on_deg``) counts as nothing."""
     cdef Params p
     p.collinear_px = params.collinear_px
@@ -1543,6 +1555,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     cdef double o1[3]
     cdef double o2[3]
     cdef double lam3
+    cdef int rule
     cdef Hypothesis* h
     cdef Py_ssize_t[::1] room_idx = np.flatnonzero((lab >= 0) & (lab != vertical_label))
     # V1 or V2 beyond doubt (:func:`companion.vision.corners.obstacle_legs`).
@@ -1564,7 +1577,9 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 # door frame's or an aligned box's, and the legs a rug's or a shadow's
                 # corner at its foot (room_edge_at). At C_g, and where the edge runs out of
                 # the frame, the room's edges that the box hides end too: no proof there.
+                rule = CORNER_PAIR
                 if not partner_ovps(&fr, &p, lines, cs[g], cn[g], partners, nh, d1, d2, &lam3):
+                    rule = SINGLE_CORNER
                     if reach[g] < 2 * p.min_edge_px or not horizon_ovps(
                             &fr, &p, s, lines, cs[g], cn[g], d1, d2, &lam3):
                         continue
@@ -1579,7 +1594,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                     if stands_short(&fr, s, lengths, cr[g], pc[g, 0], pc[g, 1], far[g, 0],
                                     far[g, 1], room_idx, o1, o2, &p):
                         continue
-                h = new_hypothesis(&found)
+                h = new_hypothesis(&found, rule)
                 set_ovps(h, d1, d2, lam3, reach[g])
                 h.corner = g
         # Vertical edges the detector did not see, implied by leg junctions above each other.

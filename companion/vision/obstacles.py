@@ -33,13 +33,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from companion.vision._obstacles import RULES, find
 from companion.vision._obstacles import edge_on_angle as _edge_on_angle
-from companion.vision._obstacles import find
 from companion.vision._obstacles import fit_box_ovps as _fit_box_ovps
 from companion.vision.corners import Corners
 from companion.vision.vanishing import V1, V2, V3, LayoutVPs
 
-__all__ = ["ObstacleParams", "Obstacle", "edge_on_angle_deg", "find_obstacles", "fit_box_ovps"]
+__all__ = ["ObstacleParams", "Obstacle", "RULES", "edge_on_angle_deg", "find_obstacles",
+           "fit_box_ovps"]
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,9 @@ class Obstacle:
     (a full pair, a partner with one leg, or no visible partner leg) supporting it.
     ``height_px``: longest vertical edge between paired corners (a size/nearness proxy).
     ``lambda3_deg``: the best pair's λ3 (eq. 8).
+    ``rule``: which rule of :func:`find_obstacles` read it (one of :data:`RULES`), for
+    diagnosis: ``corner pair`` is the paper's eqs. 5–8, the others read boxes that show
+    fewer corners.
     """
 
     ovps: np.ndarray
@@ -91,6 +95,7 @@ class Obstacle:
     pairs: int
     height_px: float
     lambda3_deg: float
+    rule: str = "corner pair"
 
 
 def find_obstacles(
@@ -138,6 +143,13 @@ def find_obstacles(
     wrong legs) hide another rule's reading of the obstacle. An obstacle edge-on at every
     corner (:func:`edge_on_angle_deg` below ``edge_on_deg``) is dropped; when the pairs'
     obstacles are all dropped, the other rules run as if none had been found.
+
+    Each obstacle names the rule that read it (``Obstacle.rule``, for diagnosis; the
+    group's first hypothesis's when several read one box): ``corner pair`` (eqs. 5–8, a
+    missed leg of ``C_h`` replaced by the horizon), ``single corner`` (no leg of ``C_h``),
+    ``leg junctions``, ``two faces`` (two vertical edges whose end legs meet on the
+    horizon, at a right angle), ``edge legs`` (a leg at each end of one vertical edge),
+    ``hidden edge``, ``one face``, ``hanging face``.
 
     Inputs: ``segments`` N×4 pixels; ``corners`` already filtered by Table I;
     ``layout`` the frame's layout VPs; ``free`` N bool, segments that may be obstacle
