@@ -536,9 +536,7 @@ cdef list edge_legs(Frame* fr, double[:, ::1] s, double[::1] lengths, list chain
                 continue
             # A room edge leaving the foot: the edge stands there, on the room's floor line
             # (a door post, an aligned box), and what lies below is something else's.
-            room_legs = []
-            attached_legs(s, lengths, room_idx, ex, ey, axx, axy, p, room_legs)
-            if room_legs:
+            if attached_legs(s, lengths, room_idx, ex, ey, axx, axy, p, None):
                 continue
             # The foot, with no leg: the nearest leg end on the edge's line below it.
             ox, oy = (-axx, -axy) if end == 0 else (axx, axy)
@@ -561,17 +559,22 @@ cdef list edge_legs(Frame* fr, double[:, ::1] s, double[::1] lengths, list chain
     return out
 
 
-cdef void attached_legs(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1] among,
-                        double ex, double ey, double axx, double axy, Params* p,
-                        list out) except *:
+cdef Py_ssize_t attached_legs(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1] among,
+                              double ex, double ey, double axx, double axy, Params* p,
+                              list out) except -1:
     """Appends to ``out`` the segments of ``among`` that leave the end (ex, ey) of a
-    vertical edge along (axx, axy) (:func:`leaves_end`), as (segment index, side)."""
+    vertical edge along (axx, axy) (:func:`leaves_end`), as (segment index, side); how
+    many. With ``out`` None, only whether any does (0 or 1)."""
     cdef double side
-    cdef Py_ssize_t j, f
+    cdef Py_ssize_t j, f, n = 0
     for j in range(among.shape[0]):
         f = among[j]
         if leaves_end(s, lengths, f, ex, ey, axx, axy, p, &side):
+            if out is None:
+                return 1
             out.append((f, 1.0 if side > 0 else -1.0))
+            n += 1
+    return n
 
 
 cdef inline bint points_at_neither(double[:, ::1] s, Py_ssize_t k, const double* o1,
