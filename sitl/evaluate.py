@@ -221,9 +221,8 @@ class EvalReport:
         out: dict[str, int] = {}
         for r in self._pick(lambda r: r.rule and (r.detectable or not r.has_obstacle)):
             rule = r.rule.replace(" ", "_")
-            for key in (f"rule_detected_{rule}", f"rule_false_{rule}"):
-                out.setdefault(key, 0)
-            out[f"rule_detected_{rule}" if r.detectable else f"rule_false_{rule}"] += 1
+            out[f"rule_detected_{rule}"] = out.get(f"rule_detected_{rule}", 0) + r.detectable
+            out[f"rule_false_{rule}"] = out.get(f"rule_false_{rule}", 0) + (not r.detectable)
         return out
 
     def range_figures(self) -> dict[str, float | int | None]:
