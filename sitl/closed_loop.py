@@ -209,11 +209,11 @@ def step_vehicle(mock, controller: OffboardController, period_s: float) -> None:
     raise TimeoutError("no telemetry from the autopilot after a lock-step")
 
 
-def _wait_engaged(controller: OffboardController, ticks: int,
+def _wait_engaged(controller: OffboardController, t_frame: float,
                   session_over: threading.Event) -> None:
     """Lock-stepped, with the simulated clock held: until the supervisor has ticked on the
-    frame's decision (``ticks``: its tick count before the decision) and any engagement
-    that began is over, either way, or :data:`ENGAGE_WAIT_S` of real time passed.
+    decision on the frame taken at ``t_frame`` and any engagement that began is over,
+    either way, or :data:`ENGAGE_WAIT_S` of real time passed.
 
     Engaging offboard is MAVSDK's and the autopilot's real-time exchange; holding the
     clock meanwhile makes the vehicle start to act at the same frame however long it takes.
@@ -221,7 +221,7 @@ def _wait_engaged(controller: OffboardController, ticks: int,
     t0 = time.monotonic()
     while not session_over.is_set() and time.monotonic() - t0 < ENGAGE_WAIT_S:
         name = controller.state.name
-        if name == "active" or (name != "engaging" and controller.ticks_done > ticks):
+        if name == "active" or (name != "engaging" and controller.ticked_t_s == t_frame):
             return
         time.sleep(0.001)
 
@@ -252,11 +252,10 @@ def submit_frame(controller: OffboardController, mock, command, eta_deg: float |
     Returns the frame's time on the controller's clock, whether it waited for offboard to
     engage, and the ``time.monotonic()`` its setpoint was sent (None: not seen sent)."""
     t_frame = controller.clock() - EXPOSURE_LEAD_S
-    ticks = controller.ticks_done
     controller.submit(command, eta_deg, t_s=t_frame, **fields)
     engaging = mock is not None and controller.state.name != "active"
     if engaging:
-        _wait_engaged(controller, ticks, session_over)
+        _wait_engaged(controller, t_frame, session_over)
     sent = _wait_sent(controller, mock, t_frame) if controller.state.name == "active" else None
     return t_frame, engaging, sent
 

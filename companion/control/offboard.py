@@ -102,7 +102,10 @@ class OffboardController:
         self.pose: VehiclePose | None = None  # newest telemetry, once both kinds arrived
         # The newest decision that went out in a setpoint: (its t_s, time.monotonic() then).
         self.sent: tuple[float, float] | None = None
-        self.ticks_done = 0  # supervisor ticks completed (a lock-stepped simulation waits on it)
+        # The frame time (t_s) of the decision the newest completed supervisor tick acted
+        # on: a lock-stepped simulation waits for its frame's. (A count of ticks would not
+        # do: a tick under way when a frame is submitted completes on the decision before.)
+        self.ticked_t_s: float | None = None
 
     # ------------------------------------------------------------------ any thread
     def submit(self, command: TurnCommand, eta_deg: float | None = None,
@@ -353,7 +356,7 @@ class _Session:
                 await self._command(_blocking(self.offboard).stop, timeout_s=1.5)
             elif step.request == "release":
                 await self._release()
-            ctl.ticks_done += 1
+            ctl.ticked_t_s = None if decision is None else decision.t_s
             if (report_every_s and vehicle.connected and now >= next_report_s
                     and decision is not None and decision.eta_deg is not None):
                 next_report_s = now + report_every_s
