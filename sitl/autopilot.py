@@ -406,7 +406,9 @@ class MockAutopilot:
             cmd_v = self._setpoint_command(self._setpoint_at(now - r.velocity_dead_s))[0]
             if v.offboard_from_s is None:
                 v.offboard_from_s = now
-            if now - v.offboard_from_s < p.offboard_climb_s:
+            # Within a microsecond, as in _setpoint_at: the climb is whole steps long, and
+            # the clock summed step by step must not decide whether it lasts one more.
+            if now - v.offboard_from_s < p.offboard_climb_s - 1e-6:
                 cmd_v = (cmd_v[0], cmd_v[1], cmd_v[2] - p.offboard_climb_m_s)
             cmd_yaw_rate = self._setpoint_command(self._setpoint_at(now - r.yaw_dead_s))[1]
         elif v.mode == TAKEOFF:
