@@ -67,6 +67,12 @@ _SUPPORTED_FRAMES = (mavlink.MAV_FRAME_LOCAL_NED, *_BODY_FRAMES)
 
 FORCE_DISARM_MAGIC = 21196
 
+CLOCK_TIE_S = 1e-6
+"""s: two simulated times this close are the same instant. Dead times and the offboard
+climb are whole simulation steps, so comparisons fall on ties, and the rounding of a clock
+summed step by step (which differs with how long the run has been going) must not decide
+them."""
+
 
 @dataclass(frozen=True)
 class Px4Mode:
@@ -382,11 +388,9 @@ class MockAutopilot:
         """The newest setpoint received at or before ``t`` (simulated s): what the vehicle
         answers now, after the response's dead time.
 
-        "At" within a microsecond: the dead times are whole simulation steps, so ``t`` often
-        falls on a setpoint's own time, and the rounding of a clock summed step by step
-        (which differs with how long the run has been going) must not decide the tie."""
+        "At" within :data:`CLOCK_TIE_S`: ``t`` often falls on a setpoint's own time."""
         for sp in reversed(self.setpoints):
-            if sp.sim_t_s <= t + 1e-6:
+            if sp.sim_t_s <= t + CLOCK_TIE_S:
                 return sp
         return None
 
@@ -406,9 +410,8 @@ class MockAutopilot:
             cmd_v = self._setpoint_command(self._setpoint_at(now - r.velocity_dead_s))[0]
             if v.offboard_from_s is None:
                 v.offboard_from_s = now
-            # Within a microsecond, as in _setpoint_at: the climb is whole steps long, and
-            # the clock summed step by step must not decide whether it lasts one more.
-            if now - v.offboard_from_s < p.offboard_climb_s - 1e-6:
+            # The climb is whole steps long: one more must not hang on the clock's rounding.
+            if now - v.offboard_from_s < p.offboard_climb_s - CLOCK_TIE_S:
                 cmd_v = (cmd_v[0], cmd_v[1], cmd_v[2] - p.offboard_climb_m_s)
             cmd_yaw_rate = self._setpoint_command(self._setpoint_at(now - r.yaw_dead_s))[1]
         elif v.mode == TAKEOFF:
