@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from companion.config import Config, MavlinkConfig
-from companion.control.offboard import OffboardController
+from companion.control.offboard import OffboardController, SentSetpoint
 from companion.control.policy import TurnHistory, decide_frame
 from companion.vision.pipeline import Pipeline
 from sitl.scene import (
@@ -226,15 +226,37 @@ def _wait_engaged(controller: OffboardController, t_frame: float,
         time.sleep(0.001)
 
 
+OVERTAKE_S = 0.01
+"""s of real time the setpoint of a frame's decision must stay the mock's newest before the
+clock moves on. MAVSDK's 20 Hz resend copies the setpoint under a lock and sends it after
+the lock is released, so a resend of the previous setpoint can leave just after the new
+one and arrive after it; held as the newest, it would fly the next step."""
+
+
+def _carries(setpoint, sent: SentSetpoint) -> bool:
+    """Whether a setpoint as the mock received it carries what ``sent`` handed to MAVSDK
+    (float32 on the wire, the yaw rate in rad/s)."""
+    return (abs(setpoint.vx_m_s - sent.forward_m_s) <= 1e-4
+            and abs(setpoint.yaw_rate_deg_s - sent.yaw_rate_deg_s) <= 1e-4)
+
+
 def _wait_sent(controller: OffboardController, mock, t_frame: float) -> float | None:
-    """Until the decision on the frame taken at ``t_frame`` is in a setpoint (and, with a
-    ``mock``, has reached it), at most 2 s: the ``time.monotonic()`` it was sent, or None."""
+    """Until the decision on the frame taken at ``t_frame`` is in a setpoint and, with a
+    ``mock``, the mock's newest setpoint carries it and still does :data:`OVERTAKE_S`
+    later; at most 2 s. Returns the ``time.monotonic()`` it was sent, or None."""
     deadline = time.monotonic() + 2.0
+    newest_since = None
     while time.monotonic() < deadline:
         sent = controller.sent
-        if sent is not None and sent[0] == t_frame and (
-                mock is None or (mock.setpoints and mock.setpoints[-1].t_s >= sent[1])):
-            return sent[1]
+        if sent is not None and sent.t_s == t_frame:
+            if mock is None:
+                return sent.monotonic_s
+            if mock.setpoints and _carries(mock.setpoints[-1], sent):
+                newest_since = newest_since or time.monotonic()
+                if time.monotonic() - newest_since >= OVERTAKE_S:
+                    return sent.monotonic_s
+            else:
+                newest_since = None
         time.sleep(0.0002)
     return None
 

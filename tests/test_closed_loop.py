@@ -2,11 +2,23 @@
 Table II → MAVSDK offboard → mock PX4 → heading → renderer. Lock-stepped, one free port each."""
 
 import math
+import threading
+import time
 
 import pytest
+from helpers.ground_station import Client
 from helpers.processes import free_udp_port
 
-from sitl.closed_loop import STARTS_DEG, format_table, run_closed_loop, write_plot
+from companion.config import Config
+from companion.control.offboard import OffboardController, SentSetpoint
+from sitl.autopilot import AutopilotParams, MockAutopilot
+from sitl.closed_loop import (
+    STARTS_DEG,
+    _wait_sent,
+    format_table,
+    run_closed_loop,
+    write_plot,
+)
 
 MAX_FRAMES = 40  # the bound on convergence; ±75° needs about 25 at ~4 frames/s
 
@@ -42,3 +54,27 @@ def test_eta_converges_into_the_deadband_without_overshoot_or_oscillation(eta0, 
     assert run.setpoints[-1][1] == 0.0
     write_plot([run], tmp_path / "loop.png")
     assert (tmp_path / "loop.png").stat().st_size > 1000
+
+
+def test_the_clock_waits_out_the_previous_setpoint_resent_after_the_new_one():
+    """MAVSDK's 20 Hz resend can send the previous setpoint just after a new one. Held as
+    the autopilot's newest, it would fly the next lock-step with the decision before; the
+    clock must wait for the resend that carries the new one."""
+    ground = Client()
+    with MockAutopilot(ground.port, AutopilotParams(boot_in_air=True, lockstep=True)) as mock:
+        assert ground.recv("HEARTBEAT") is not None
+        controller = OffboardController(Config())
+        controller.sent = SentSetpoint(t_s=1.0, monotonic_s=time.monotonic(),
+                                       forward_m_s=0.0, yaw_rate_deg_s=10.0)
+        ground.setpoint(math.radians(10.0))  # the decision's setpoint
+        ground.setpoint(0.0)  # the previous one, resent after it
+        assert mock.wait_for(lambda: len(mock.setpoints) == 2, 1.0)
+        resend = threading.Timer(0.05, ground.setpoint, (math.radians(10.0),))
+        resend.start()
+        try:
+            assert _wait_sent(controller, mock, t_frame=1.0) is not None
+            assert len(mock.setpoints) == 3
+            assert mock.setpoints[-1].yaw_rate_deg_s == pytest.approx(10.0, abs=1e-4)
+        finally:
+            resend.cancel()
+            ground.close()

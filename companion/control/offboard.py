@@ -38,7 +38,8 @@ from companion.control.policy import TurnCommand
 
 log = logging.getLogger("companion.offboard")
 
-__all__ = ["AutopilotNotFound", "OffboardController", "VehiclePose", "run_until_signal"]
+__all__ = ["AutopilotNotFound", "OffboardController", "SentSetpoint", "VehiclePose",
+           "run_until_signal"]
 
 # MAVSDK as COMPANION_COMPUTER: the autopilot's system id, component 195 (PX4-NOTES.md).
 COMPANION_SYSTEM_ID = 1
@@ -77,6 +78,18 @@ class VehiclePose:
     position_updates: int
 
 
+@dataclass(frozen=True)
+class SentSetpoint:
+    """The newest decision that went out in a setpoint: the frame time it was decided on
+    (``t_s``, on the controller's clock), the ``time.monotonic()`` it was handed to MAVSDK,
+    and what the setpoint carried."""
+
+    t_s: float
+    monotonic_s: float
+    forward_m_s: float
+    yaw_rate_deg_s: float
+
+
 class OffboardController:
     """Streams the newest turn decision to PX4 over MAVSDK, within the supervisor's rules.
 
@@ -100,8 +113,7 @@ class OffboardController:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._wake: asyncio.Event | None = None
         self.pose: VehiclePose | None = None  # newest telemetry, once both kinds arrived
-        # The newest decision that went out in a setpoint: (its t_s, time.monotonic() then).
-        self.sent: tuple[float, float] | None = None
+        self.sent: SentSetpoint | None = None
         # The frame time (t_s) of the decision the newest completed supervisor tick acted
         # on: a lock-stepped simulation waits for its frame's. (A count of ticks would not
         # do: a tick under way when a frame is submitted completes on the decision before.)
@@ -348,7 +360,8 @@ class _Session:
                 await self._call(self.offboard.set_velocity_body(VelocityBodyYawspeed(
                     step.forward_m_s, 0.0, 0.0, step.yaw_rate_deg_s)))
                 if ctl.state.name == "active" and decision is not None:
-                    ctl.sent = (decision.t_s, time.monotonic())
+                    ctl.sent = SentSetpoint(decision.t_s, time.monotonic(),
+                                            step.forward_m_s, step.yaw_rate_deg_s)
             self.streaming = step.stream
             if step.request == "start":
                 await self._command(_blocking(self.offboard).start, timeout_s=1.5)
