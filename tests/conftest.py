@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from helpers.ground_station import Client
 
 from sitl.sample import sample_scene
 from sitl.scene import write_video, yaw_sweep
@@ -26,3 +27,12 @@ def blank_video(tmp_path_factory):
         w.write(np.full((240, 320, 3), 128, np.uint8))
     w.release()
     return path
+
+
+@pytest.fixture
+def client():
+    """A bare ground station on 127.0.0.1 (:class:`helpers.ground_station.Client`), closed
+    after the test."""
+    c = Client()
+    yield c
+    c.close()

@@ -8,17 +8,9 @@ import socket
 import time
 
 import pytest
-from helpers.ground_station import Client
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl.autopilot import HOLD, OFFBOARD, POSCTL, RTL, AutopilotParams, MockAutopilot, Px4Mode
-
-
-@pytest.fixture
-def client():
-    c = Client()
-    yield c
-    c.close()
 
 
 def start(client, **params) -> MockAutopilot:

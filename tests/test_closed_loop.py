@@ -6,7 +6,6 @@ import threading
 import time
 
 import pytest
-from helpers.ground_station import Client
 from helpers.processes import free_udp_port
 
 from companion.config import Config
@@ -56,20 +55,19 @@ def test_eta_converges_into_the_deadband_without_overshoot_or_oscillation(eta0, 
     assert (tmp_path / "loop.png").stat().st_size > 1000
 
 
-def test_the_clock_waits_out_the_previous_setpoint_resent_after_the_new_one():
+def test_the_clock_waits_out_the_previous_setpoint_resent_after_the_new_one(client):
     """MAVSDK's 20 Hz resend can send the previous setpoint just after a new one. Held as
     the autopilot's newest, it would fly the next lock-step with the decision before; the
     clock must wait for the resend that carries the new one."""
-    ground = Client()
-    with MockAutopilot(ground.port, AutopilotParams(boot_in_air=True, lockstep=True)) as mock:
-        assert ground.recv("HEARTBEAT") is not None
+    with MockAutopilot(client.port, AutopilotParams(boot_in_air=True, lockstep=True)) as mock:
+        assert client.recv("HEARTBEAT") is not None
         controller = OffboardController(Config())
         controller.sent = SentSetpoint(t_s=1.0, monotonic_s=time.monotonic(),
                                        forward_m_s=0.0, yaw_rate_deg_s=10.0)
-        ground.setpoint(math.radians(10.0))  # the decision's setpoint
-        ground.setpoint(0.0)  # the previous one, resent after it
+        client.setpoint(math.radians(10.0))  # the decision's setpoint
+        client.setpoint(0.0)  # the previous one, resent after it
         assert mock.wait_for(lambda: len(mock.setpoints) == 2, 1.0)
-        resend = threading.Timer(0.05, ground.setpoint, (math.radians(10.0),))
+        resend = threading.Timer(0.05, client.setpoint, (math.radians(10.0),))
         resend.start()
         try:
             assert _wait_sent(controller, mock, t_frame=1.0) is not None
@@ -77,4 +75,3 @@ def test_the_clock_waits_out_the_previous_setpoint_resent_after_the_new_one():
             assert mock.setpoints[-1].yaw_rate_deg_s == pytest.approx(10.0, abs=1e-4)
         finally:
             resend.cancel()
-            ground.close()

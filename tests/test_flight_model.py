@@ -5,7 +5,7 @@ import math
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
-from test_autopilot_mock import Client, set_mode
+from test_autopilot_mock import set_mode
 
 from sitl.autopilot import OFFBOARD, RTL, AutopilotParams, MockAutopilot
 from sitl.multicopter import Motion, Response, step
@@ -45,13 +45,6 @@ def test_the_body_tilts_into_the_acceleration():
     assert abs(cruising.pitch_deg) < 0.2
     east = Motion(yaw_deg=0.0)  # heading north, pushed east: to the right, roll right
     assert fly_step((0.0, 1.0, 0.0), 0.0, 0.3, east).roll_deg > 2.0
-
-
-@pytest.fixture
-def client():
-    c = Client()
-    yield c
-    c.close()
 
 
 def forward_setpoint(client, forward_m_s, yaw_rate_rad_s=0.0):
