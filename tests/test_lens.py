@@ -14,6 +14,7 @@ from companion.vision.lens import (
     radial_k,
     undistort_maps,
 )
+from companion.vision.lines import noise_sigma, to_gray
 from companion.vision.pipeline import LENS_FRAMES, Pipeline, RunningLens
 from sitl.sample import sample_scene
 from sitl.scene import Camera, render, yaw_sweep
@@ -174,3 +175,19 @@ def test_a_lens_without_its_focal_length_is_refused():
     with pytest.raises(ValueError, match="needs camera.focal_px"):
         Pipeline(replace(Config(), camera=replace(Config().camera, distortion=(-0.1,))))
     Pipeline(replace(Config(), camera=replace(Config().camera, distortion=(0.0,))))  # pinhole
+
+
+def test_the_noise_the_step_test_measures_against_is_the_noise_of_the_frame_as_captured():
+    # Undoing a lens resamples the frame: each pixel a blend of its neighbours, which hides
+    # about a third of the noise from the estimator (it reads fine detail) but little of it
+    # from a step averaged along a segment. So the noise is measured before the remap.
+    rng = np.random.default_rng(5)
+    frame = np.clip(128 + rng.normal(0.0, 4.0, (480, 640)), 0, 255).astype(np.uint8)
+    frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+    cfg = replace(Config(), camera=replace(Config().camera, focal_px=320.0))
+    pinhole = Pipeline(replace(cfg, camera=replace(cfg.camera, distortion=(0.0,))))(frame)
+    undone = Pipeline(replace(cfg, camera=replace(cfg.camera, distortion=(-0.05,))))
+    bent = undone(frame)
+    assert pinhole.noise_sigma == pytest.approx(4.0, rel=0.05)
+    assert bent.noise_sigma == pinhole.noise_sigma
+    assert noise_sigma(to_gray(undone.pinhole(frame))) < 0.8 * bent.noise_sigma  # the remap's

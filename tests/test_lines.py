@@ -137,12 +137,13 @@ def test_only_unassigned_segments_are_put_to_the_step_test():
                          [90.0, 100.5, 230.0, 100.5],   # inside it: no edge
                          [90.0, 30.5, 230.0, 30.5]])    # above it: no edge, but V1's
     labels = np.array([NONE, NONE, V1])
-    kept, kept_labels, dropped = Pipeline(Config())._drop_noise(frame, segments, labels)
+    sigma = noise_sigma(frame)
+    kept, kept_labels, dropped = Pipeline(Config())._drop_noise(frame, sigma, segments, labels)
     assert np.array_equal(kept, segments[[0, 2]]) and list(kept_labels) == [NONE, V1]
     assert np.array_equal(dropped, segments[[1]])  # for the annotated video to draw
     cfg = Config()
     off = Pipeline(replace(cfg, vision=replace(cfg.vision, min_step_z=0.0)))
-    kept, _, dropped = off._drop_noise(frame, segments, labels)
+    kept, _, dropped = off._drop_noise(frame, sigma, segments, labels)
     assert np.array_equal(kept, segments) and len(dropped) == 0
 
 
