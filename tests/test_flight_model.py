@@ -4,7 +4,6 @@ mock in lock-step, driven by a plain pymavlink client over loopback UDP."""
 import math
 
 import pytest
-from pymavlink.dialects.v20 import common as mavlink
 from test_autopilot_mock import set_mode
 
 from sitl.autopilot import OFFBOARD, RTL, AutopilotParams, MockAutopilot
@@ -47,24 +46,18 @@ def test_the_body_tilts_into_the_acceleration():
     assert fly_step((0.0, 1.0, 0.0), 0.0, 0.3, east).roll_deg > 2.0
 
 
-def forward_setpoint(client, forward_m_s, yaw_rate_rad_s=0.0):
-    client.send(client.mav.set_position_target_local_ned_encode(
-        0, 1, 1, mavlink.MAV_FRAME_BODY_NED, 1479, 0, 0, 0, forward_m_s, 0, 0, 0, 0, 0, 0,
-        yaw_rate_rad_s))
-
-
 def test_lockstep_moves_only_when_advanced_and_flies_the_body_frame(client):
     ap = MockAutopilot(client.port, AutopilotParams(
         lockstep=True, boot_in_air=True, arm_ready_s=0.0, boot_yaw_deg=90.0)).start()
     try:
         assert client.recv("HEARTBEAT") is not None  # the link runs on real time
-        forward_setpoint(client, 1.0)
+        client.setpoint(forward_m_s=1.0)
         assert set_mode(client, OFFBOARD) == 0 and ap.mode == OFFBOARD
         before = ap.vehicle.motion.north_m, ap.vehicle.motion.east_m
         client.recv("NOTHING", timeout_s=0.3)  # real time passes ...
         assert (ap.vehicle.motion.north_m, ap.vehicle.motion.east_m) == before  # ... no motion
         for _ in range(30):  # 3 s of simulated time, heading east
-            forward_setpoint(client, 1.0)
+            client.setpoint(forward_m_s=1.0)
             client.recv("NOTHING", timeout_s=0.005)
             t = ap.advance(0.1)
         m = ap.vehicle.motion
@@ -99,7 +92,7 @@ def test_lockstep_failsafe_runs_on_simulated_time(client):
         lockstep=True, boot_in_air=True, arm_ready_s=0.0)).start()
     try:
         assert client.recv("HEARTBEAT") is not None
-        forward_setpoint(client, 0.5)
+        client.setpoint(forward_m_s=0.5)
         assert set_mode(client, OFFBOARD) == 0
         client.recv("NOTHING", timeout_s=1.5)  # 1.5 s of real time without setpoints ...
         assert ap.mode == OFFBOARD  # ... is no simulated time at all

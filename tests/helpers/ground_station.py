@@ -46,9 +46,10 @@ class Client:
         ack = self.recv("COMMAND_ACK", 1.0, where=lambda m: m.command == cmd)
         return None if ack is None else ack.result
 
-    def setpoint(self, yaw_rate_rad_s: float = 0.0) -> None:
+    def setpoint(self, yaw_rate_rad_s: float = 0.0, forward_m_s: float = 0.0) -> None:
+        """A body-frame velocity and yaw-rate setpoint, as MAVSDK's offboard sends it."""
         self.send(self.mav.set_position_target_local_ned_encode(
-            0, 1, 1, mavlink.MAV_FRAME_BODY_NED, 1479, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,
+            0, 1, 1, mavlink.MAV_FRAME_BODY_NED, 1479, 0, 0, 0, forward_m_s, 0, 0, 0, 0, 0, 0,
             yaw_rate_rad_s))
 
     def close(self) -> None:
