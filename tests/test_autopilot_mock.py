@@ -19,10 +19,6 @@ def start(client, **params) -> MockAutopilot:
     return ap
 
 
-def set_mode(client, mode: Px4Mode) -> int:
-    return client.command(mavlink.MAV_CMD_DO_SET_MODE, 1, mode.main, mode.sub)
-
-
 def test_heartbeat_is_a_px4_quadrotor_with_mode_and_armed_flag(client):
     with start(client, boot_in_air=True):
         hb = client.recv("HEARTBEAT")
@@ -53,13 +49,13 @@ def test_commands_get_truthful_acks(client):
 def test_offboard_needs_a_setpoint_stream_in_the_air(client):
     with start(client, boot_in_air=True) as ap:
         # As PX4 does: accepted, but the mode does not change.
-        assert set_mode(client, OFFBOARD) == mavlink.MAV_RESULT_ACCEPTED
+        assert client.set_mode(OFFBOARD) == mavlink.MAV_RESULT_ACCEPTED
         time.sleep(0.3)
         assert ap.mode == HOLD
         for _ in range(3):
             client.setpoint()
             time.sleep(0.1)
-        assert set_mode(client, OFFBOARD) == mavlink.MAV_RESULT_ACCEPTED
+        assert client.set_mode(OFFBOARD) == mavlink.MAV_RESULT_ACCEPTED
         assert ap.wait_for(lambda: ap.mode == OFFBOARD, 0.5)
 
 
@@ -68,7 +64,7 @@ def test_setpoint_loss_fails_safe_after_com_of_loss_t(client):
         client.setpoint(0.5)
         time.sleep(0.05)
         client.setpoint(0.5)
-        assert set_mode(client, OFFBOARD) == 0
+        assert client.set_mode(OFFBOARD) == 0
         t_last = time.monotonic()
         client.setpoint(0.5)
         assert ap.wait_for(lambda: ap.mode != OFFBOARD, 2.0)
@@ -81,7 +77,7 @@ def test_setpoint_loss_fails_safe_after_com_of_loss_t(client):
 def test_body_yaw_rate_turns_the_vehicle_and_every_setpoint_is_recorded(client):
     with start(client, boot_in_air=True) as ap:
         client.setpoint(0.0)
-        assert set_mode(client, OFFBOARD) == 0
+        assert client.set_mode(OFFBOARD) == 0
         y0, t0 = ap.yaw_deg, time.monotonic()
         while time.monotonic() - t0 < 1.5:
             client.setpoint(-0.349066)  # -20 deg/s: turn left
@@ -99,7 +95,7 @@ def test_body_yaw_rate_turns_the_vehicle_and_every_setpoint_is_recorded(client):
 def test_pilot_switch_wins_over_offboard(client):
     with start(client, boot_in_air=True) as ap:
         client.setpoint()
-        assert set_mode(client, OFFBOARD) == 0
+        assert client.set_mode(OFFBOARD) == 0
         ap.pilot_set_mode(POSCTL)
         hb = client.recv("HEARTBEAT", 1.5, where=lambda m: m.custom_mode == POSCTL.custom_mode)
         assert hb is not None

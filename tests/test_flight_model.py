@@ -4,7 +4,6 @@ mock in lock-step, driven by a plain pymavlink client over loopback UDP."""
 import math
 
 import pytest
-from test_autopilot_mock import set_mode
 
 from sitl.autopilot import OFFBOARD, RTL, AutopilotParams, MockAutopilot
 from sitl.multicopter import Motion, Response, step
@@ -52,7 +51,7 @@ def test_lockstep_moves_only_when_advanced_and_flies_the_body_frame(client):
     try:
         assert client.recv("HEARTBEAT") is not None  # the link runs on real time
         client.setpoint(forward_m_s=1.0)
-        assert set_mode(client, OFFBOARD) == 0 and ap.mode == OFFBOARD
+        assert client.set_mode(OFFBOARD) == 0 and ap.mode == OFFBOARD
         before = ap.vehicle.motion.north_m, ap.vehicle.motion.east_m
         client.recv("NOTHING", timeout_s=0.3)  # real time passes ...
         assert (ap.vehicle.motion.north_m, ap.vehicle.motion.east_m) == before  # ... no motion
@@ -93,7 +92,7 @@ def test_lockstep_failsafe_runs_on_simulated_time(client):
     try:
         assert client.recv("HEARTBEAT") is not None
         client.setpoint(forward_m_s=0.5)
-        assert set_mode(client, OFFBOARD) == 0
+        assert client.set_mode(OFFBOARD) == 0
         client.recv("NOTHING", timeout_s=1.5)  # 1.5 s of real time without setpoints ...
         assert ap.mode == OFFBOARD  # ... is no simulated time at all
         ap.advance(0.9)

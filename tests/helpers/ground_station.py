@@ -46,6 +46,11 @@ class Client:
         ack = self.recv("COMMAND_ACK", 1.0, where=lambda m: m.command == cmd)
         return None if ack is None else ack.result
 
+    def set_mode(self, mode) -> int | None:
+        """Ask for a PX4 mode (a ``sitl.autopilot.Px4Mode``), as MAVSDK does; the ACK's
+        result, None without one."""
+        return self.command(mavlink.MAV_CMD_DO_SET_MODE, 1, mode.main, mode.sub)
+
     def setpoint(self, yaw_rate_rad_s: float = 0.0, forward_m_s: float = 0.0) -> None:
         """A body-frame velocity and yaw-rate setpoint, as MAVSDK's offboard sends it."""
         self.send(self.mav.set_position_target_local_ned_encode(
