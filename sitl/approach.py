@@ -24,7 +24,9 @@ start                  1.5 m from the near wall, within ±1 m of the room's midd
 obstacle               centre 3–7 m ahead, within ±0.5 m of the line of flight,
                        rotated 12°–45° off the room's axes (either way), 0.8–1.6 m
                        by 0.5–1.0 m, 0.4–1.0 m taller than the flight altitude
-                       (``--eye-level``: 0.1–0.25 m taller, :meth:`Approach.at_eye_level`)
+                       (``--eye-level``: 0.1–0.25 m taller, :meth:`Approach.at_eye_level`;
+                       ``--manhattan``: square to the room, against a side wall,
+                       :meth:`Approach.aside`)
 furniture              0–3 aligned (Manhattan) boxes along the side walls
 flight                 takeoff altitude 0.8–1.3 m requested (the harness reads the
                        altitude the autopilot levels off at), forward speed
@@ -109,6 +111,7 @@ FURNITURE = (0, 3)
 ALTITUDE_M = (0.8, 1.3)
 SPEED_M_S = (0.4, 0.8)
 HFOV_DEG = (60.0, 90.0)
+TURNED_DEG = 10.0  # --manhattan: a run whose heading left the course by more turned for nothing
 SLACK_S = 15.0  # time limit: twice the straight flight to the pass line, plus this
 
 
@@ -169,15 +172,29 @@ class Approach:
         return replace(self, obstacle_above_m=elo + (ehi - elo)
                        * (self.obstacle_above_m - lo) / (hi - lo))
 
+    def aside(self) -> Approach:
+        """The same run with nothing to avoid: the obstacle turned square to the room and
+        moved across to the side wall on its side of the course, its distance ahead kept
+        (so the run still ends at its pass line). A Manhattan room, its clutter and side
+        furniture: whatever the vehicle turns for is a false alarm."""
+        box = self.boxes[0]
+        side = 1.0 if self.obstacle_off_line_m >= 0.0 else -1.0
+        square = replace(box, yaw_deg=0.0)
+        wall = self.room.y_max if side > 0 else self.room.y_min
+        square = replace(square, y=wall - side * (0.15 + 0.5 * square.width))
+        return replace(self, boxes=(square, *self.boxes[1:]), obstacle_rel_yaw_deg=0.0)
+
     def scene(self) -> Scene:
         return Scene(room=self.room, boxes=self.boxes, noise_sigma=self.noise_sigma,
                      blur_sigma=self.blur_sigma, seed=self.scene_seed)
 
 
-def draw_approach(seed: int, run: int, eye_level: bool = False) -> Approach:
+def draw_approach(seed: int, run: int, eye_level: bool = False,
+                  manhattan: bool = False) -> Approach:
     """Run ``run`` of the scenario set ``seed`` (the ranges in the module docstring);
     ``eye_level``: the same run with the obstacle's top near the flight altitude
-    (:meth:`Approach.at_eye_level`)."""
+    (:meth:`Approach.at_eye_level`); ``manhattan``: with nothing to avoid
+    (:meth:`Approach.aside`)."""
     rng = np.random.default_rng([seed, run])
     u = rng.uniform
     length, width = u(*ROOM_LENGTH_M), u(*ROOM_WIDTH_M)
@@ -215,7 +232,8 @@ def draw_approach(seed: int, run: int, eye_level: bool = False) -> Approach:
         obstacle_ahead_m=ahead, obstacle_off_line_m=off, obstacle_rel_yaw_deg=rel,
         obstacle_above_m=u(*OBSTACLE_ABOVE_FLIGHT_M), noise_sigma=u(1.5, 4.0),
         blur_sigma=u(0.4, 0.9), scene_seed=int(rng.integers(0, 2**31 - 1)))
-    return drawn.at_eye_level() if eye_level else drawn
+    drawn = drawn.at_eye_level() if eye_level else drawn
+    return drawn.aside() if manhattan else drawn
 
 
 def pathtraced_room(ap: Approach, spp: int = 8):
@@ -499,15 +517,16 @@ def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray
     """η and the tracked η (or None), whether the scene was understood, and the range and
     path distance (:class:`~companion.control.supervisor.Decision`), as the policy sees the
     frame (``image``: the rendered frame, for ``paper``, measured at the camera height the
-    autopilot reports, as the service does). The oracle knows no range and tracks
-    nothing."""
+    autopilot reports, as the service does). The oracle knows no range; its true η is its
+    own track, so it steers the same whether the policy steers by the track or not."""
     if policy == "paper":
         est = pipeline(image, camera_height_m=cam.height_m)
         return (est.eta_deg, est.eta_tracked_deg, est.scene_understood, est.range_m,
                 est.path_m(pipeline.config.policy.path_half_width_m))
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
-        return (truth.eta_deg if truth.corners_px else None), None, True, None, None
+        eta = truth.eta_deg if truth.corners_px else None
+        return eta, eta, True, None, None
     return None, None, True, None, None
 
 
@@ -538,7 +557,8 @@ def _one(job: tuple) -> tuple[Approach, RunResult]:
     logging.getLogger("mavsdk").setLevel(logging.ERROR)
     kw = dict(kw)
     speed = kw.pop("speed_m_s", None)
-    ap = draw_approach(seed, run, eye_level=kw.pop("eye_level", False))
+    ap = draw_approach(seed, run, eye_level=kw.pop("eye_level", False),
+                       manhattan=kw.pop("manhattan", False))
     if speed is not None:
         ap = replace(ap, speed_m_s=speed)
     from companion.control.offboard import AutopilotNotFound
@@ -594,8 +614,11 @@ def _pct(values: Sequence[float], q: float) -> float | None:
 
 
 def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: int,
-              renderer: str = "scene", eye_level: bool = False) -> dict:
-    """The figures of a set of runs (the ``--json`` document)."""
+              renderer: str = "scene", eye_level: bool = False, manhattan: bool = False
+              ) -> dict:
+    """The figures of a set of runs (the ``--json`` document). ``turned_runs``: the runs
+    whose heading left the course by more than :data:`TURNED_DEG` (with ``manhattan``,
+    each a false alarm flown)."""
     rs = [r for _, r in results]
     n = len(rs)
     count = {k: sum(r.outcome == k for r in rs) for k in ("passed", "collision", "timeout",
@@ -619,12 +642,13 @@ def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: 
             "detail": r.detail, "path": r.path, "decisions": r.decisions})
     return {
         "scenario": "approach", "policy": policy, "renderer": renderer, "seed": seed,
-        "eye_level": eye_level, "runs": n,
+        "eye_level": eye_level, "manhattan": manhattan, "runs": n,
         "passed": count["passed"], "collisions": count["collision"],
         "timeouts": count["timeout"], "errors": count["error"],
         "collision_free_rate": round((n - count["collision"] - count["error"]) / n, 4)
         if n else None,
         "pass_rate": round(count["passed"] / n, 4) if n else None,
+        "turned_runs": sum(r.max_turn_deg > TURNED_DEG for r in rs),
         "time_to_pass_s": {"median": _pct(passed_t, 50), "p90": _pct(passed_t, 90)},
         "decision_latency_ms": {"median": _pct(decision, 50), "p99": _pct(decision, 99)},
         "frame_to_setpoint_ms": {"median": _pct(setpoint, 50), "p99": _pct(setpoint, 99)},
@@ -648,10 +672,14 @@ def format_report(summary: dict) -> list[str]:
     n = s["runs"]
     drawn = "" if s.get("renderer", "scene") == "scene" else f", {s['renderer']} rooms"
     drawn += ", obstacle at eye level" if s.get("eye_level") else ""
+    drawn += ", nothing to avoid (--manhattan)" if s.get("manhattan") else ""
     out.append(f"policy {s['policy']}{drawn}, {n} runs (seed {s['seed']}): passed {s['passed']}, "
                f"collisions {s['collisions']}, timeouts {s['timeouts']}, errors {s['errors']}; "
                f"collision-free {100 * s['collision_free_rate']:.1f} %, "
                f"passed {100 * s['pass_rate']:.1f} %")
+    if s.get("manhattan"):
+        out.append(f"turned for nothing: {s['turned_runs']} of {n} runs left the course by "
+                   f"more than {TURNED_DEG:g}°")
     tp, dl, sp = s["time_to_pass_s"], s["decision_latency_ms"], s["frame_to_setpoint_ms"]
     if tp["median"] is not None:
         out.append(f"time to pass: median {tp['median']:.1f} s, p90 {tp['p90']:.1f} s")
@@ -761,12 +789,13 @@ def simulate_approach(args, progress=None) -> int:
             autopilot_url=args.autopilot, camera_hz=args.camera_hz, width=args.width,
             height=args.height, base=base, focal_given=not args.no_focal,
             speed_m_s=args.speed, lens_k1=args.lens, renderer=args.renderer, spp=args.spp,
-            eye_level=args.eye_level)
+            eye_level=args.eye_level, manhattan=args.manhattan)
     except AutopilotNotFound as exc:
         raise ValueError(str(exc)) from None
     if progress is not None:
         progress(args.runs, args.runs, "")
-    summary = summarize(results, args.policy, args.seed, args.renderer, args.eye_level)
+    summary = summarize(results, args.policy, args.seed, args.renderer, args.eye_level,
+                        args.manhattan)
     for line in format_report(summary):
         print(line)
     options = "" if args.speed is None else f" --speed {args.speed:g}"
@@ -775,6 +804,7 @@ def simulate_approach(args, progress=None) -> int:
         options += f" --renderer {args.renderer} --spp {args.spp}"
     options += " --no-focal" if args.no_focal else ""
     options += " --eye-level" if args.eye_level else ""
+    options += " --manhattan" if args.manhattan else ""
     print(f"({time.perf_counter() - started:.0f} s; companion sim --scenario approach "
           f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{options})")
     for r in summary["per_run"]:

@@ -481,6 +481,10 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     help="approach: the same runs with the obstacle's top 0.1-0.25 m above "
                          "the hover altitude, seen nearly edge-on all the way in (furniture "
                          "at the height the vehicle cruises at)")
+    ap.add_argument("--manhattan", action="store_true",
+                    help="approach: the same runs with the obstacle square to the room and "
+                         "against a side wall: nothing to avoid, so every turn is a false "
+                         "alarm flown (the report counts the runs that left the course)")
     ap.add_argument("--json", metavar="PATH", help="approach: write the figures as JSON")
     ap.add_argument("--config", metavar="PATH", dest="sim_config",
                     help="approach: YAML config for the companion (policy, offboard ...)")
@@ -494,8 +498,8 @@ def simulate(args: argparse.Namespace) -> int:
         return simulate_approach(args)
     if args.renderer != "scene":
         raise ValueError("--renderer pathtraced goes with --scenario approach")
-    if args.eye_level:
-        raise ValueError("--eye-level goes with --scenario approach")
+    if args.eye_level or args.manhattan:
+        raise ValueError("--eye-level and --manhattan go with --scenario approach")
     if args.sim_config:
         raise ValueError("--config goes with --scenario approach")
     runs = []

@@ -64,6 +64,27 @@ def test_an_eye_level_run_is_the_same_run_with_the_obstacles_top_at_the_flight_a
     assert first_contact(flown.room, flown.boxes, x, y, 1.1 + 0.2) == "obstacle"
 
 
+@pytest.mark.parametrize("run", range(6))
+def test_a_manhattan_run_is_the_same_run_with_nothing_in_the_flight_path(run):
+    regular, aside = draw_approach(7, run), draw_approach(7, run, manhattan=True)
+    assert aside.room == regular.room and aside.boxes[1:] == regular.boxes[1:]
+    assert aside.start_x_m == regular.start_x_m and aside.course_deg == regular.course_deg
+    box = aside.boxes[0]
+    assert box.yaw_deg == 0.0 and (box.length, box.width) == (regular.boxes[0].length,
+                                                                regular.boxes[0].width)
+    # Against the side wall on the obstacle's side, as far ahead as it stood.
+    side = math.copysign(1.0, regular.obstacle_off_line_m)
+    wall = aside.room.y_max if side > 0 else aside.room.y_min
+    assert abs(wall - box.y) == pytest.approx(0.15 + box.width / 2)
+    assert box.x == regular.boxes[0].x
+    # Flying straight along the course meets nothing up to the pass line.
+    ap = aside.at_altitude(aside.altitude_m)
+    u, _ = ap.course_axes()
+    start = np.array([ap.start_x_m, ap.start_y_m])
+    assert all(first_contact(ap.room, ap.boxes, *(start + s * u), ap.altitude_m) is None
+               for s in np.arange(0.0, ap.pass_distance_m(), 0.05))
+
+
 def test_first_contact_knows_walls_obstacle_furniture_and_overflight():
     room = Room(x_min=0.0, x_max=10.0, y_min=-3.0, y_max=3.0)
     obstacle = Box(5.0, 0.0, 30.0, 1.0, 0.6, 1.5)
@@ -212,13 +233,14 @@ def test_summary_counts_outcomes():
     from sitl.approach import RunResult
 
     ap = draw_approach(0, 0)
-    rs = [(ap, RunResult(0, "passed", None, 10.0, 50, 0.5, 20.0, 1.2, [3.0], [0.5])),
+    rs = [(ap, RunResult(0, "passed", None, 10.0, 50, 0.5, 5.0, 1.2, [3.0], [0.5])),
           (ap, RunResult(1, "collision", "wall", 8.0, 40, 0.9, 40.0, 1.2, [4.0], [0.7])),
           (ap, RunResult(2, "timeout", None, 40.0, 200, 0.9, 40.0, 1.2, [5.0], [0.6]))]
     s = summarize(rs, "paper", 0)
     assert (s["passed"], s["collisions"], s["timeouts"]) == (1, 1, 1)
     assert s["collision_free_rate"] == pytest.approx(2 / 3, abs=1e-4)
     assert s["pass_rate"] == pytest.approx(1 / 3, abs=1e-4)
+    assert s["turned_runs"] == 2  # 40° off the course twice; 5° is within the 10° line
 
 
 @pytest.mark.skipif(not os.environ.get("PX4_SITL_URL"),

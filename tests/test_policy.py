@@ -99,16 +99,17 @@ def test_steering_eta_is_the_frames_unless_a_confirmed_track_is_asked_for():
     from companion.control.policy import steering_eta
 
     tracked = PolicyConfig(steer_by_track=True)
-    assert steering_eta(44.0, -46.0, PolicyConfig()) == 44.0  # the paper: per frame
+    assert steering_eta(44.0, -46.0, PolicyConfig(steer_by_track=False)) == 44.0  # per frame
+    assert steering_eta(12.0, None, PolicyConfig(steer_by_track=False)) == 12.0
     assert steering_eta(44.0, -46.0, tracked) == -46.0  # the track's face, held
-    assert steering_eta(12.0, None, tracked) == 12.0  # no confirmed track yet
+    assert steering_eta(12.0, None, tracked) is None  # one frame, not yet confirmed: no turn
     assert steering_eta(None, 20.0, tracked) == 20.0  # a dropout bridged by the track
 
 
 def test_decide_frame_steers_by_the_track_only_when_asked_and_confirms_reversals():
     from companion.control.policy import TurnHistory, decide_frame
 
-    per_frame = PolicyConfig()
+    per_frame = PolicyConfig(steer_by_track=False)
     by_track = PolicyConfig(steer_by_track=True)
     # The frame says left, the confirmed track says right.
     eta, cmd, _ = decide_frame(-20.0, 25.0, per_frame, TurnHistory())
@@ -116,7 +117,7 @@ def test_decide_frame_steers_by_the_track_only_when_asked_and_confirms_reversals
     eta, cmd, _ = decide_frame(-20.0, 25.0, by_track, TurnHistory())
     assert (eta, cmd.action) == (25.0, "right")
     eta, cmd, _ = decide_frame(-20.0, None, by_track, TurnHistory())  # no track yet
-    assert (eta, cmd.action) == (-20.0, "left")
+    assert (eta, cmd.action) == (None, "forward")
     # After a right turn, a left is flown only on the second frame asking for it.
     history = TurnHistory()
     actions = []

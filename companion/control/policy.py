@@ -73,10 +73,10 @@ class TurnCommand:
 def steering_eta(eta_deg: float | None, eta_tracked_deg: float | None,
                  policy: PolicyConfig) -> float | None:
     """The η to steer by: the frame's (eq. 10), or with ``steer_by_track`` the tracked one
-    wherever the tracker reports one (it holds eq. 9's choice of face and bridges dropouts)."""
-    if policy.steer_by_track and eta_tracked_deg is not None:
-        return eta_tracked_deg
-    return eta_deg
+    (it holds eq. 9's choice of face and bridges dropouts), None while the tracker reports
+    nothing: a detection no second frame (or second corner pair) has confirmed is not
+    flown, since one frame's false alarm would turn the vehicle off its course."""
+    return eta_tracked_deg if policy.steer_by_track else eta_deg
 
 
 def obstacle_matters(range_m: float | None, policy: PolicyConfig) -> bool:
