@@ -498,8 +498,9 @@ def simulate(args: argparse.Namespace) -> int:
         return simulate_approach(args)
     if args.renderer != "scene":
         raise ValueError("--renderer pathtraced goes with --scenario approach")
-    if args.eye_level or args.manhattan:
-        raise ValueError("--eye-level and --manhattan go with --scenario approach")
+    for flag, given in (("--eye-level", args.eye_level), ("--manhattan", args.manhattan)):
+        if given:
+            raise ValueError(f"{flag} goes with --scenario approach")
     if args.sim_config:
         raise ValueError("--config goes with --scenario approach")
     runs = []

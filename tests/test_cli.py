@@ -373,6 +373,7 @@ def test_bench_and_sim_reject_bad_arguments_in_one_line():
                                "--lens", "-0.05"), "draws its own lens")
     _assert_one_line_error(run("sim", "--renderer", "pathtraced"), "goes with --scenario approach")
     _assert_one_line_error(run("sim", "--eye-level"), "--eye-level goes with --scenario approach")
+    _assert_one_line_error(run("sim", "--manhattan"), "--manhattan goes with --scenario approach")
     _assert_one_line_error(run("eval", "--variants"), "--variants needs --yud")
     _assert_one_line_error(run("eval", "--lens-given"), "go with --renderer")
     _assert_one_line_error(run("eval", "--renderer", "scene", "--long"), "--long goes with --clips")
