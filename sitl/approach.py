@@ -517,15 +517,16 @@ def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray
     """η and the tracked η (or None), whether the scene was understood, and the range and
     path distance (:class:`~companion.control.supervisor.Decision`), as the policy sees the
     frame (``image``: the rendered frame, for ``paper``, measured at the camera height the
-    autopilot reports, as the service does). The oracle knows no range; its true η is its
-    own track, so it steers the same whether the policy steers by the track or not."""
+    autopilot reports, as the service does). The oracle knows no range, and turns only for
+    a rotated obstacle in view (not for the square one of ``--manhattan``); its true η is
+    its own track, so it steers the same whether the policy steers by the track or not."""
     if policy == "paper":
         est = pipeline(image, camera_height_m=cam.height_m)
         return (est.eta_deg, est.eta_tracked_deg, est.scene_understood, est.range_m,
                 est.path_m(pipeline.config.policy.path_half_width_m))
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
-        eta = truth.eta_deg if truth.corners_px else None
+        eta = truth.eta_deg if truth.corners_px and truth.non_manhattan else None
         return eta, eta, True, None, None
     return None, None, True, None, None
 

@@ -85,6 +85,19 @@ def test_a_manhattan_run_is_the_same_run_with_nothing_in_the_flight_path(run):
                for s in np.arange(0.0, ap.pass_distance_m(), 0.05))
 
 
+def test_the_oracle_sees_the_rotated_obstacle_and_nothing_in_a_manhattan_run():
+    from sitl.approach import _observe
+    from sitl.scene import Camera
+
+    for manhattan in (False, True):
+        ap = draw_approach(0, 0, manhattan=manhattan).at_altitude(1.0)
+        cam = Camera(width=640, height=480, hfov_deg=ap.hfov_deg, x=ap.start_x_m,
+                     y=ap.start_y_m, height_m=1.0, yaw_deg=ap.course_deg)
+        eta, tracked, understood, *_ = _observe("oracle", ap.scene(), cam, None, None)
+        assert understood and eta == tracked
+        assert (eta is None) == manhattan
+
+
 def test_first_contact_knows_walls_obstacle_furniture_and_overflight():
     room = Room(x_min=0.0, x_max=10.0, y_min=-3.0, y_max=3.0)
     obstacle = Box(5.0, 0.0, 30.0, 1.0, 0.6, 1.5)
