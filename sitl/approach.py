@@ -108,6 +108,7 @@ OBSTACLE_WIDTH_M = (0.5, 1.0)
 OBSTACLE_ABOVE_FLIGHT_M = (0.4, 1.0)
 OBSTACLE_ABOVE_EYE_LEVEL_M = (0.1, 0.25)  # --eye-level: Approach.at_eye_level
 FURNITURE = (0, 3)
+WALL_GAP_M = 0.15  # furniture along a side wall stands at least this far from it
 ALTITUDE_M = (0.8, 1.3)
 SPEED_M_S = (0.4, 0.8)
 HFOV_DEG = (60.0, 90.0)
@@ -179,9 +180,8 @@ class Approach:
         furniture: whatever the vehicle turns for is a false alarm."""
         box = self.boxes[0]
         side = 1.0 if self.obstacle_off_line_m >= 0.0 else -1.0
-        square = replace(box, yaw_deg=0.0)
         wall = self.room.y_max if side > 0 else self.room.y_min
-        square = replace(square, y=wall - side * (0.15 + 0.5 * square.width))
+        square = replace(box, yaw_deg=0.0, y=wall - side * (WALL_GAP_M + 0.5 * box.width))
         return replace(self, boxes=(square, *self.boxes[1:]), obstacle_rel_yaw_deg=0.0)
 
     def scene(self) -> Scene:
@@ -217,7 +217,7 @@ def draw_approach(seed: int, run: int, eye_level: bool = False,
         b = Box(u(2.0, length - 1.0), 0.0, float(90.0 * rng.integers(0, 2)), u(0.5, 1.4),
                 u(0.4, 0.8), u(0.5, 2.0), random_colour(rng, 0.15, 0.6))
         reach = b.radius()
-        b = replace(b, y=side * (width / 2 - 0.15 - reach - u(0.0, 0.5)))
+        b = replace(b, y=side * (width / 2 - WALL_GAP_M - reach - u(0.0, 0.5)))
         if all(math.hypot(b.x - o.x, b.y - o.y) > reach + o.radius() + 0.3 for o in boxes):
             boxes.append(b)
     clutter = bool(rng.random() < 0.5)

@@ -14,6 +14,7 @@ from companion.cli import main
 from companion.control.offboard import OffboardController
 from sitl.approach import (
     BODY_RADIUS_M,
+    WALL_GAP_M,
     FrameMap,
     draw_approach,
     first_contact,
@@ -75,7 +76,7 @@ def test_a_manhattan_run_is_the_same_run_with_nothing_in_the_flight_path(run):
     # Against the side wall on the obstacle's side, as far ahead as it stood.
     side = math.copysign(1.0, regular.obstacle_off_line_m)
     wall = aside.room.y_max if side > 0 else aside.room.y_min
-    assert abs(wall - box.y) == pytest.approx(0.15 + box.width / 2)
+    assert abs(wall - box.y) == pytest.approx(WALL_GAP_M + box.width / 2)
     assert box.x == regular.boxes[0].x
     # Flying straight along the course meets nothing up to the pass line.
     ap = aside.at_altitude(aside.altitude_m)
