@@ -105,9 +105,11 @@ class PolicyConfig:
     slow_within_m: float = field(default=3.5, metadata=_range(0.0, 100.0))
     stop_within_m: float = field(default=1.5, metadata=_range(0.0, 100.0))
     path_half_width_m: float = field(default=0.5, metadata=_range(0.05, 10.0))
-    # Steer by the η tracked across frames alone (vision/tracking.py): a detection no
-    # second frame confirmed turns nothing. Off: the paper's per-frame η (docs/flight.md).
+    # Steer by the η tracked across frames (vision/tracking.py): a detection no second
+    # frame confirmed turns nothing, unless unconfirmed_when_ranged and its floor contact
+    # is measured. Off: the paper's per-frame η (docs/flight.md).
     steer_by_track: bool = False
+    unconfirmed_when_ranged: bool = True
 
 
 @dataclass(frozen=True)

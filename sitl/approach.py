@@ -341,7 +341,8 @@ class RunResult:
     decision_ms: list[float] = field(default_factory=list)
     setpoint_ms: list[float] = field(default_factory=list)
     path: list[tuple[float, float]] = field(default_factory=list)
-    # per frame: (t_s, heading_deg in the room, η or None, action, range_m, path_m) as
+    # per frame: (t_s, heading_deg in the room, η steered by or None, action, range_m,
+    # path_m, the frame's η, the tracked η, the rule that read the frame's obstacle) as
     # decided (range and path distance None when not measured, path inf when clear)
     decisions: list[tuple] = field(default_factory=list)
     detail: str = ""
@@ -484,8 +485,8 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                 image = cv2.remap(image, *lens, cv2.INTER_LINEAR,
                                   borderMode=cv2.BORDER_REPLICATE)
             t0 = time.perf_counter()  # the frame is taken: decide
-            seen, tracked, understood, range_m, path_m = _observe(policy, scene, cam, pipeline,
-                                                                  image)
+            seen, tracked, understood, range_m, path_m, rule = _observe(policy, scene, cam,
+                                                                        pipeline, image)
             eta, cmd, history = decide_frame(seen, tracked, cfg.policy, history, understood,
                                              range_m)
             result.decision_ms.append((time.perf_counter() - t0) * 1e3)
@@ -494,7 +495,8 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                                              range_m=range_m, path_m=path_m)
             result.decisions.append((round(result.time_s, 2), round(heading, 2),
                                      None if eta is None else round(eta, 2), cmd.action,
-                                     _round(range_m), _round(path_m)))
+                                     _round(range_m), _round(path_m), _round(seen),
+                                     _round(tracked), rule))
             if controller.state.name == "active":
                 if sent is not None and not engaging:  # the engaging frame waited: no latency
                     result.setpoint_ms.append((sent - t_wall) * 1e3)
@@ -513,9 +515,11 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
 
 
 def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None
-             ) -> tuple[float | None, float | None, bool, float | None, float | None]:
-    """η and the tracked η (or None), whether the scene was understood, and the range and
-    path distance (:class:`~companion.control.supervisor.Decision`), as the policy sees the
+             ) -> tuple[float | None, float | None, bool, float | None, float | None,
+                        str | None]:
+    """η and the tracked η (or None), whether the scene was understood, the range and
+    path distance (:class:`~companion.control.supervisor.Decision`), and the rule that read
+    the frame's obstacle (``Obstacle.rule``; None without one), as the policy sees the
     frame (``image``: the rendered frame, for ``paper``, measured at the camera height the
     autopilot reports, as the service does). The oracle knows no range, and turns only for
     a rotated obstacle in view (not for the square one of ``--manhattan``); its true η is
@@ -523,12 +527,13 @@ def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray
     if policy == "paper":
         est = pipeline(image, camera_height_m=cam.height_m)
         return (est.eta_deg, est.eta_tracked_deg, est.scene_understood, est.range_m,
-                est.path_m(pipeline.config.policy.path_half_width_m))
+                est.path_m(pipeline.config.policy.path_half_width_m),
+                est.obstacles[0].rule if est.obstacles else None)
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
         eta = truth.eta_deg if truth.corners_px and truth.non_manhattan else None
-        return eta, eta, True, None, None
-    return None, None, True, None, None
+        return eta, eta, True, None, None, None
+    return None, None, True, None, None, None
 
 
 def _round(x: float | None) -> float | str | None:

@@ -12,6 +12,7 @@ from helpers.processes import free_udp_port
 
 from companion.cli import main
 from companion.control.offboard import OffboardController
+from companion.vision.obstacles import RULES
 from sitl.approach import (
     BODY_RADIUS_M,
     WALL_GAP_M,
@@ -202,10 +203,15 @@ def test_the_pipeline_flies_past_and_the_figures_are_written(tmp_path):
     assert plot.stat().st_size > 5000
     assert all(r["speed_m_s"] == 0.6 for r in figures["per_run"])
     # The pipeline measured range at the altitude the autopilot reported, as in flight:
-    # (t, heading, η, action, range_m, path_m) per frame.
-    ranges = [d[4] for r in figures["per_run"] for d in r["decisions"] if d[2] is not None]
+    # (t, heading, η, action, range_m, path_m, frame's η, tracked η, rule) per frame.
+    decisions = [d for r in figures["per_run"] for d in r["decisions"]]
+    ranges = [d[4] for d in decisions if d[2] is not None]
     measured = [x for x in ranges if x is not None]
     assert measured and all(x > 0.5 for x in measured)  # nearer is below the view
+    # Steered by the frame's η (the default), each read by a rule of the obstacle stage.
+    assert all(d[2] == d[6] for d in decisions)
+    assert all(d[8] in RULES for d in decisions if d[6] is not None)
+    assert any(d[7] is not None for d in decisions)  # and the tracker confirmed some
 
 
 def test_the_path_traced_room_is_the_runs_room():

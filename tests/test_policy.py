@@ -104,6 +104,11 @@ def test_steering_eta_is_the_frames_unless_a_confirmed_track_is_asked_for():
     assert steering_eta(44.0, -46.0, tracked) == -46.0  # the track's face, held
     assert steering_eta(12.0, None, tracked) is None  # one frame, not yet confirmed: no turn
     assert steering_eta(None, 20.0, tracked) == 20.0  # a dropout bridged by the track
+    # Not yet confirmed, but its foot is measured on the floor: flown, unless asked not to.
+    assert steering_eta(12.0, None, tracked, range_m=3.0) == 12.0
+    assert steering_eta(44.0, -46.0, tracked, range_m=3.0) == -46.0  # the track still wins
+    alone = PolicyConfig(steer_by_track=True, unconfirmed_when_ranged=False)
+    assert steering_eta(12.0, None, alone, range_m=3.0) is None
 
 
 def test_decide_frame_steers_by_the_track_only_when_asked_and_confirms_reversals():
@@ -118,6 +123,10 @@ def test_decide_frame_steers_by_the_track_only_when_asked_and_confirms_reversals
     assert (eta, cmd.action) == (25.0, "right")
     eta, cmd, _ = decide_frame(-20.0, None, by_track, TurnHistory())  # no track yet
     assert (eta, cmd.action) == (None, "forward")
+    # No track yet, the foot measured: near, flown; beyond act_within_m, not yet.
+    eta, cmd, _ = decide_frame(-20.0, None, by_track, TurnHistory(), range_m=3.0)
+    assert (eta, cmd.action) == (-20.0, "left")
+    assert decide_frame(-20.0, None, by_track, TurnHistory(), range_m=9.0)[1].action == "forward"
     # After a right turn, a left is flown only on the second frame asking for it.
     history = TurnHistory()
     actions = []

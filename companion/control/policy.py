@@ -71,12 +71,22 @@ class TurnCommand:
 
 
 def steering_eta(eta_deg: float | None, eta_tracked_deg: float | None,
-                 policy: PolicyConfig) -> float | None:
+                 policy: PolicyConfig, range_m: float | None = None) -> float | None:
     """The η to steer by: the frame's (eq. 10), or with ``steer_by_track`` the tracked one
-    (it holds eq. 9's choice of face and bridges dropouts), None while the tracker reports
-    nothing: a detection no second frame (or second corner pair) has confirmed is not
-    flown, since one frame's false alarm would turn the vehicle off its course."""
-    return eta_tracked_deg if policy.steer_by_track else eta_deg
+    (it holds eq. 9's choice of face and bridges dropouts). While the tracker reports
+    nothing, a detection no second frame (or second corner pair) has confirmed is flown
+    only with ``unconfirmed_when_ranged`` and its floor contact measured (``range_m``, m;
+    :func:`obstacle_matters` still applies ``act_within_m``). One frame's false alarm
+    turns the vehicle off its course, and about half of them had no foot measured; an
+    obstacle seen on scattered frames, as at eye level, is confirmed too late or never
+    (docs/flight.md)."""
+    if not policy.steer_by_track:
+        return eta_deg
+    if eta_tracked_deg is not None:
+        return eta_tracked_deg
+    if policy.unconfirmed_when_ranged and range_m is not None:
+        return eta_deg
+    return None
 
 
 def obstacle_matters(range_m: float | None, policy: PolicyConfig) -> bool:
@@ -210,7 +220,7 @@ def decide_frame(eta_deg: float | None, eta_tracked_deg: float | None, policy: P
     (:func:`steering_eta`), Table II on it (:func:`decide_turn`), then the reversal rule
     (:func:`confirm_reversal`). Returns that η, the command and the history for the next
     frame."""
-    eta = steering_eta(eta_deg, eta_tracked_deg, policy)
+    eta = steering_eta(eta_deg, eta_tracked_deg, policy, range_m)
     command, history = confirm_reversal(decide_turn(eta, policy, scene_understood, range_m),
                                         history)
     return eta, command, history
