@@ -175,14 +175,18 @@ class Approach:
 
     def aside(self) -> Approach:
         """The same run with nothing to avoid: the obstacle turned square to the room and
-        moved across to the side wall on its side of the course, its distance ahead kept
-        (so the run still ends at its pass line). A Manhattan room, its clutter and side
-        furniture: whatever the vehicle turns for is a false alarm."""
+        moved across the room to the side wall on its side of the course, as far along
+        the room as it stood (so the run ends near its pass line). A Manhattan room, its
+        clutter and side furniture: whatever the vehicle turns for is a false alarm. The
+        obstacle's reported offsets are those of where it now stands."""
         box = self.boxes[0]
         side = 1.0 if self.obstacle_off_line_m >= 0.0 else -1.0
         wall = self.room.y_max if side > 0 else self.room.y_min
         square = replace(box, yaw_deg=0.0, y=wall - side * (WALL_GAP_M + 0.5 * box.width))
-        return replace(self, boxes=(square, *self.boxes[1:]), obstacle_rel_yaw_deg=0.0)
+        u, v = self.course_axes()
+        to_box = np.array([square.x - self.start_x_m, square.y - self.start_y_m])
+        return replace(self, boxes=(square, *self.boxes[1:]), obstacle_rel_yaw_deg=0.0,
+                       obstacle_ahead_m=float(to_box @ u), obstacle_off_line_m=float(to_box @ v))
 
     def scene(self) -> Scene:
         return Scene(room=self.room, boxes=self.boxes, noise_sigma=self.noise_sigma,

@@ -79,6 +79,13 @@ def test_a_manhattan_run_is_the_same_run_with_nothing_in_the_flight_path(run):
     wall = aside.room.y_max if side > 0 else aside.room.y_min
     assert abs(wall - box.y) == pytest.approx(WALL_GAP_M + box.width / 2)
     assert box.x == regular.boxes[0].x
+    # The run reports where the obstacle now stands, off the line on the same side.
+    u, v = aside.course_axes()
+    to_box = np.array([box.x - aside.start_x_m, box.y - aside.start_y_m])
+    assert aside.obstacle_ahead_m == pytest.approx(to_box @ u)
+    assert aside.obstacle_off_line_m == pytest.approx(to_box @ v)
+    assert abs(aside.obstacle_off_line_m) > abs(regular.obstacle_off_line_m)
+    assert math.copysign(1.0, aside.obstacle_off_line_m) == side
     # Flying straight along the course meets nothing up to the pass line.
     ap = aside.at_altitude(aside.altitude_m)
     u, _ = ap.course_axes()
