@@ -105,11 +105,12 @@ class PolicyConfig:
     slow_within_m: float = field(default=3.5, metadata=_range(0.0, 100.0))
     stop_within_m: float = field(default=1.5, metadata=_range(0.0, 100.0))
     path_half_width_m: float = field(default=0.5, metadata=_range(0.05, 10.0))
-    # Steer by the η tracked across frames (vision/tracking.py): a detection no second
-    # frame confirmed turns nothing, unless unconfirmed_when_ranged and its floor contact
-    # is measured. Off: the paper's per-frame η (docs/flight.md).
+    # In forward flight, a detection the tracker (vision/tracking.py) has not confirmed
+    # is turned for at once (fly, the paper), once its floor contact is measured
+    # (ranged), or never (wait); steer_by_track steers by the tracked η instead of the
+    # frame's, and applies the same rule to every decision (docs/flight.md).
+    unconfirmed: str = field(default="fly", metadata={"choices": ("fly", "ranged", "wait")})
     steer_by_track: bool = False
-    unconfirmed_when_ranged: bool = True
 
 
 @dataclass(frozen=True)

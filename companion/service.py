@@ -103,7 +103,8 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
                           obstacle_distance=from_estimate(
                               est, config.mavlink.obstacle_distance_increment_deg),
                           range_m=est.range_m,
-                          path_m=est.path_m(config.policy.path_half_width_m))
+                          path_m=est.path_m(config.policy.path_half_width_m),
+                          confirmed=est.eta_tracked_deg is not None)
         now = time.monotonic()
         health.decisions += 1
         health.last_decision_s = now

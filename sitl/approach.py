@@ -496,7 +496,8 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             result.decision_ms.append((time.perf_counter() - t0) * 1e3)
             t_wall = time.monotonic()
             _, engaging, sent = submit_frame(controller, mock, cmd, eta, session_over,
-                                             range_m=range_m, path_m=path_m)
+                                             range_m=range_m, path_m=path_m,
+                                             confirmed=tracked is not None)
             result.decisions.append((round(result.time_s, 2), round(heading, 2),
                                      None if eta is None else round(eta, 2), cmd.action,
                                      _round(range_m), _round(path_m), _round(seen),

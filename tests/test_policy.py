@@ -98,24 +98,42 @@ def test_path_speed_scale_falls_from_slow_within_to_stop_within():
 def test_steering_eta_is_the_frames_unless_a_confirmed_track_is_asked_for():
     from companion.control.policy import steering_eta
 
-    tracked = PolicyConfig(steer_by_track=True)
-    assert steering_eta(44.0, -46.0, PolicyConfig(steer_by_track=False)) == 44.0  # per frame
-    assert steering_eta(12.0, None, PolicyConfig(steer_by_track=False)) == 12.0
+    per_frame = PolicyConfig()  # every frame's η, as the paper
+    assert steering_eta(44.0, -46.0, per_frame) == 44.0
+    assert steering_eta(12.0, None, per_frame) == 12.0
+    assert steering_eta(None, 20.0, per_frame) is None  # no bridging without the track
+    tracked = PolicyConfig(steer_by_track=True, unconfirmed="wait")
     assert steering_eta(44.0, -46.0, tracked) == -46.0  # the track's face, held
     assert steering_eta(12.0, None, tracked) is None  # one frame, not yet confirmed: no turn
     assert steering_eta(None, 20.0, tracked) == 20.0  # a dropout bridged by the track
-    # Not yet confirmed, but its foot is measured on the floor: flown, unless asked not to.
+    assert steering_eta(12.0, None, tracked, range_m=3.0) is None  # wait: even if ranged
+
+
+def test_an_unconfirmed_detection_is_turned_for_once_its_foot_is_measured():
+    from companion.control.policy import steering_eta, turns_for
+
+    assert PolicyConfig().unconfirmed == "fly"  # the default: the paper, every frame's η
+    ranged = PolicyConfig(unconfirmed="ranged")
+    assert turns_for(True, None, ranged)  # confirmed by the tracker
+    assert not turns_for(False, None, ranged)  # one frame, no foot measured
+    assert turns_for(False, 3.0, ranged) and turns_for(False, 30.0, ranged)  # act_within_m
+    assert turns_for(False, None, PolicyConfig(unconfirmed="fly"))  # the paper
+    assert not turns_for(False, 3.0, PolicyConfig(unconfirmed="wait"))
+    # The per-frame decision stays the paper's (the log's action follows its η); the
+    # supervisor applies the rule in forward flight. Steered by the track, the decision:
+    assert steering_eta(12.0, None, ranged) == 12.0
+    tracked = PolicyConfig(steer_by_track=True, unconfirmed="ranged")
+    assert steering_eta(12.0, None, tracked) is None
     assert steering_eta(12.0, None, tracked, range_m=3.0) == 12.0
     assert steering_eta(44.0, -46.0, tracked, range_m=3.0) == -46.0  # the track still wins
-    alone = PolicyConfig(steer_by_track=True, unconfirmed_when_ranged=False)
-    assert steering_eta(12.0, None, alone, range_m=3.0) is None
+    assert steering_eta(12.0, None, PolicyConfig(steer_by_track=True)) == 12.0  # fly
 
 
 def test_decide_frame_steers_by_the_track_only_when_asked_and_confirms_reversals():
     from companion.control.policy import TurnHistory, decide_frame
 
-    per_frame = PolicyConfig(steer_by_track=False)
-    by_track = PolicyConfig(steer_by_track=True)
+    per_frame = PolicyConfig()
+    by_track = PolicyConfig(steer_by_track=True, unconfirmed="ranged")
     # The frame says left, the confirmed track says right.
     eta, cmd, _ = decide_frame(-20.0, 25.0, per_frame, TurnHistory())
     assert (eta, cmd.action) == (-20.0, "left")

@@ -1,5 +1,7 @@
 """The offboard state machine and the yaw-rate budget, on values alone (no MAVSDK)."""
 
+from dataclasses import replace
+
 import pytest
 
 from companion.config import OffboardConfig, PolicyConfig
@@ -124,9 +126,9 @@ FORWARD = TurnCommand("forward", 0.0, 0.0)
 HOLD_CMD = TurnCommand("hold", 0.0, 0.0)
 
 
-def fly(state, decision, now, yaw_deg=0.0, config=FLY):
+def fly(state, decision, now, yaw_deg=0.0, config=FLY, policy=POLICY):
     vehicle = VehicleStatus(True, armed=True, in_air=True, offboard=True, yaw_deg=yaw_deg)
-    return supervise(state, vehicle, decision, now, config, POLICY)
+    return supervise(state, vehicle, decision, now, config, policy)
 
 
 def engaged(now=0.0, yaw_deg=0.0, config=FLY):
@@ -331,6 +333,29 @@ def test_an_obstacle_beyond_act_within_sets_no_target_and_the_course_resumes():
     step = fly(step.state, Decision(0.1, FORWARD, 40.0, 0.0, range_m=9.0, path_m=9.0), 0.1)
     assert step.state.target_deg is None and step.state.obstacle_t_s is None
     step = fly(step.state, Decision(0.3, RIGHT, 40.0, 0.0, range_m=5.0, path_m=5.0), 0.3)
+    assert step.state.target_deg == 30.0
+
+
+def test_an_unconfirmed_detection_sets_no_target_until_its_foot_is_measured():
+    ranged = replace(POLICY, unconfirmed="ranged")
+    step = engaged(yaw_deg=0.0)
+    # One frame, not confirmed by the tracker, no foot measured: no turn ...
+    lone = Decision(0.1, RIGHT, 40.0, 0.0, confirmed=False)
+    step = fly(step.state, lone, 0.1, policy=ranged)
+    assert step.state.target_deg is None and step.yaw_rate_deg_s == 0.0
+    assert step.state.obstacle_t_s == 0.1  # ... but seen: the course waits for it to pass
+    # The next frame confirms it: the target is set from that frame's η.
+    step = fly(step.state, Decision(0.3, RIGHT, 40.0, 0.0), 0.3, policy=ranged)
+    assert step.state.target_deg == 30.0
+    # Not confirmed, but its foot measured within act_within_m: flown at once.
+    step = engaged(yaw_deg=0.0)
+    step = fly(step.state, Decision(0.1, RIGHT, 40.0, 0.0, range_m=4.0, confirmed=False), 0.1,
+               policy=ranged)
+    assert step.state.target_deg == 30.0
+    # The default, as the paper (unconfirmed: fly): every frame's η is flown.
+    assert POLICY.unconfirmed == "fly"
+    step = engaged(yaw_deg=0.0)
+    step = fly(step.state, lone, 0.1)
     assert step.state.target_deg == 30.0
 
 

@@ -18,7 +18,7 @@ on the wrong side of the centre; alone it must not swing the vehicle back.
 
 In forward flight the same rule is flown as a heading (:func:`avoidance_heading`): the
 heading the frame was taken at plus η, its turn capped at ``max_turn_deg``, held in closed
-loop on the heading the autopilot reports (:func:`heading_rate`). Three additions beyond the
+loop on the heading the autopilot reports (:func:`heading_rate`). Additions beyond the
 paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
 
 - a pass-off angle: the heading is at least ``min_avoid_deg`` off the course, on the
@@ -30,6 +30,12 @@ paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
   measures an obstacle in the flight path (:func:`keeps_side`). Beside a box just
   passed, one wrong reading (a rug's corner over a floor seam, read as the box's foot)
   otherwise turned the vehicle across the course into it;
+- optionally (``unconfirmed: ranged``), a detection confirmed: a frame's η the tracker has
+  not confirmed sets no heading until its obstacle's floor contact is measured
+  (:func:`turns_for`); it still counts as an obstacle in view, so the course does not
+  resume toward it. Half the turns for one-frame false alarms (a striped rug, a shadow)
+  go, but an obstacle seen on scattered frames is turned for late or never, so the
+  default flies every frame's η, as the paper;
 - the course resumed: Table II aligns the heading with the face, up to 45° off the course
   the pilot set, and nothing in the paper ever turns back, so the vehicle left the
   obstacle behind and flew on into the side wall. Once no obstacle has been in view for
@@ -55,7 +61,7 @@ from companion.config import PolicyConfig
 
 __all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
            "decide_frame", "decide_turn", "heading_rate", "keeps_side", "obstacle_matters",
-           "pass_side", "path_speed_scale", "steering_eta", "wrap_deg"]
+           "pass_side", "path_speed_scale", "steering_eta", "turns_for", "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
@@ -72,21 +78,26 @@ class TurnCommand:
 
 def steering_eta(eta_deg: float | None, eta_tracked_deg: float | None,
                  policy: PolicyConfig, range_m: float | None = None) -> float | None:
-    """The η to steer by: the frame's (eq. 10), or with ``steer_by_track`` the tracked one
-    (it holds eq. 9's choice of face and bridges dropouts). While the tracker reports
-    nothing, a detection no second frame (or second corner pair) has confirmed is flown
-    only with ``unconfirmed_when_ranged`` and its floor contact measured (``range_m``, m;
-    :func:`obstacle_matters` still applies ``act_within_m``). One frame's false alarm
-    turns the vehicle off its course, and about half of them had no foot measured; an
-    obstacle seen on scattered frames, as at eye level, is confirmed too late or never
-    (docs/flight.md)."""
-    if not policy.steer_by_track:
+    """The η to steer by, or None: the frame's (eq. 10), or with ``steer_by_track`` the
+    tracked one (it holds eq. 9's choice of face and bridges dropouts); then a detection
+    the tracker has not confirmed is steered by only as :func:`turns_for` says (without
+    ``steer_by_track`` the supervisor applies that rule in forward flight)."""
+    if eta_tracked_deg is not None:  # confirmed
+        return eta_tracked_deg if policy.steer_by_track else eta_deg
+    if eta_deg is None or not policy.steer_by_track:
         return eta_deg
-    if eta_tracked_deg is not None:
-        return eta_tracked_deg
-    if policy.unconfirmed_when_ranged and range_m is not None:
-        return eta_deg
-    return None
+    return eta_deg if turns_for(False, range_m, policy) else None
+
+
+def turns_for(confirmed: bool, range_m: float | None, policy: PolicyConfig) -> bool:
+    """Whether a detection is turned for: one the tracker has ``confirmed`` (a second
+    frame, or a second corner pair of its frame, agrees on it) always; one it has not as
+    ``unconfirmed`` says: ``fly`` always, as the paper does; ``ranged`` once its floor
+    contact is measured (``range_m``, m; :func:`obstacle_matters` still applies
+    ``act_within_m``); ``wait`` never. Most one-frame false alarms had no foot measured,
+    and flown they turn the vehicle off its course (docs/flight.md)."""
+    return (confirmed or policy.unconfirmed == "fly"
+            or (policy.unconfirmed == "ranged" and range_m is not None))
 
 
 def obstacle_matters(range_m: float | None, policy: PolicyConfig) -> bool:

@@ -56,6 +56,7 @@ from companion.control.policy import (
     obstacle_matters,
     pass_side,
     path_speed_scale,
+    turns_for,
     wrap_deg,
 )
 
@@ -92,6 +93,7 @@ class Decision:
     range_m: float | None = None  # to the obstacle's floor contact; None: not measured
     path_m: float | None = None  # to the nearest obstacle in the path; inf: none; None: not
     #                              measured (ranging.path_distance)
+    confirmed: bool = True  # the tracker confirms the obstacle (policy.turns_for)
 
 
 @dataclass(frozen=True)
@@ -297,15 +299,17 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
     A decision that turns (or sees the face aligned, within the deadband) sets the target
     from its η and heading; one whose turn the reversal rule held back (``forward`` with
     η outside the deadband), or that asks to pass on the other side of the course than
-    the pass-off taken (:func:`~companion.control.policy.keeps_side`), leaves the target
-    as it was.
+    the pass-off taken (:func:`~companion.control.policy.keeps_side`), or that the tracker
+    has not confirmed (:func:`~companion.control.policy.turns_for`), leaves the target as
+    it was.
     """
     if (not fresh or decision is None or decision.eta_deg is None
             or not obstacle_matters(decision.range_m, policy)):
         return keep
     keep = {**keep, "obstacle_t_s": decision.t_s}
-    if decision.heading_deg is None or decision.t_s == keep.get("target_from_t_s"):
-        return keep
+    if (decision.heading_deg is None or decision.t_s == keep.get("target_from_t_s")
+            or not turns_for(decision.confirmed, decision.range_m, policy)):
+        return keep  # seen, so the course does not resume toward it, but not turned for
     action, eta = decision.command.action, decision.eta_deg
     if action in ("left", "right") or (action == "forward" and abs(eta) <= policy.deadband_deg):
         side = pass_side(eta, decision.heading_deg, course_deg)
