@@ -431,3 +431,21 @@ def test_without_resume_course_the_side_is_released_once_the_obstacle_is_passed(
         step = supervise(step.state, vehicle, Decision(t, FORWARD), t, FLY, policy)
         assert step.yaw_rate_deg_s == 0.0  # no course to resume: the heading is held
     assert step.state.pass_side == 0 and t >= 0.1 + policy.resume_after_s
+
+
+def test_a_new_engagement_flies_nothing_an_earlier_one_saw():
+    step = engaged(yaw_deg=0.0)
+    step = see(step.state, 0.1, 40.0, "right", 0.0)  # pass right, toward 30°
+    assert step.state.target_deg == 30.0 and step.state.pass_side == 1
+    # The pilot takes over, flies elsewhere, and offboard is enabled again at heading 90°.
+    pilot = VehicleStatus(True, armed=True, in_air=True, offboard=False, yaw_deg=90.0)
+    step = supervise(step.state, pilot, Decision(0.2, FORWARD), 0.2, FLY, POLICY)
+    assert step.state.name == "disabled"
+    step = supervise(enable(step.state), pilot, Decision(20.0, FORWARD), 20.0, FLY, POLICY)
+    assert step.state.name == "engaging"
+    for k in range(1, 30):  # 1.5 s with nothing in view: no turn, on the new course
+        t = 20.0 + 0.05 * k
+        step = fly(step.state, Decision(t, FORWARD), t, yaw_deg=90.0)
+        assert step.state.name == "active" and step.yaw_rate_deg_s == 0.0
+    assert step.state.course_deg == 90.0 and step.state.target_deg is None
+    assert step.state.pass_side == 0 and step.state.obstacle_t_s is None

@@ -207,19 +207,19 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         flown_m = max(was, 0.0) * max(dt, 0.0)  # since the last tick, at the speed streamed
         forward = forward_speed_setpoint(decision, now_s, was, dt, config)
         course = vehicle.yaw_deg if engaged_now else prev.course_deg
-        keep = {} if engaged_now else {"obstacle_t_s": prev.obstacle_t_s,
-                                       "target_deg": prev.target_deg,
-                                       "target_from_t_s": prev.target_from_t_s,
-                                       "pass_side": prev.pass_side}
+        # An engagement starts with nothing seen: what an earlier one saw, the heading it
+        # flew to pass it and its side belong to another course and place in the room.
+        mem = replace(prev, **_FORGOTTEN_ON_ENGAGING) if engaged_now else prev
+        keep = {"obstacle_t_s": mem.obstacle_t_s, "target_deg": mem.target_deg,
+                "target_from_t_s": mem.target_from_t_s, "pass_side": mem.pass_side}
         if config.forward_speed_m_s > 0.0:
-            path, path_t = path_ahead(prev, decision, fresh, now_s, flown_m)
+            path, path_t = path_ahead(mem, decision, fresh, now_s, flown_m)
             keep = {**keep, "path_m": path, "path_t_s": path_t}
             forward = min(forward, config.forward_speed_m_s * path_speed_scale(path, policy))
         if config.forward_speed_m_s > 0.0 and course is not None and vehicle.yaw_deg is not None:
             keep = _pass_target(keep, decision, fresh, course, policy)
             target, seen_t = keep.get("target_deg"), keep.get("obstacle_t_s")
-            flown = 0.0 if engaged_now or seen_t != prev.obstacle_t_s else (
-                prev.flown_since_seen_m + flown_m)
+            flown = 0.0 if seen_t != mem.obstacle_t_s else mem.flown_since_seen_m + flown_m
             keep["flown_since_seen_m"] = flown
             # The course resumes resume_after_s after the obstacle left the view, and once
             # as far has been flown as that takes at full speed: a vehicle slowed by range
@@ -290,6 +290,11 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         return step("waiting")
 
     return step("waiting" if prev.enabled else "disabled")
+
+
+_FORGOTTEN_ON_ENGAGING = {"obstacle_t_s": None, "target_deg": None, "target_from_t_s": None,
+                          "pass_side": 0, "path_m": None, "path_t_s": None,
+                          "flown_since_seen_m": 0.0}
 
 
 def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg: float,
