@@ -66,6 +66,7 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -329,6 +330,21 @@ class FrameMap:
 # --------------------------------------------------------------------------- one run
 
 
+class FrameDecision(NamedTuple):
+    """One frame of a run, as decided (rounded; in the ``--json`` document a list in this
+    order, named by its ``decision_fields``)."""
+
+    t_s: float  # simulated time since the first frame
+    heading_deg: float  # in the room's frame
+    eta_steered_deg: float | None  # the η Table II was applied to (policy.steering_eta)
+    action: str
+    range_m: float | str | None  # to the obstacle's floor contact; None: not measured
+    path_m: float | str | None  # to the nearest obstacle in the path; "inf": clear
+    eta_deg: float | None  # the frame's own η (eq. 10)
+    eta_tracked_deg: float | None  # the tracker's; None: no confirmed track
+    rule: str | None  # the obstacle stage's rule that read the frame's obstacle
+
+
 @dataclass
 class RunResult:
     """One run: how it ended and what it flew. Times in simulated (vehicle) seconds from
@@ -345,10 +361,7 @@ class RunResult:
     decision_ms: list[float] = field(default_factory=list)
     setpoint_ms: list[float] = field(default_factory=list)
     path: list[tuple[float, float]] = field(default_factory=list)
-    # per frame: (t_s, heading_deg in the room, η steered by or None, action, range_m,
-    # path_m, the frame's η, the tracked η, the rule that read the frame's obstacle) as
-    # decided (range and path distance None when not measured, path inf when clear)
-    decisions: list[tuple] = field(default_factory=list)
+    decisions: list[FrameDecision] = field(default_factory=list)  # one per frame
     detail: str = ""
     # how far the obstacle's top stood above the camera, lowest and highest over the frames
     top_above_camera_m: tuple[float, float] = (math.inf, -math.inf)
@@ -498,10 +511,10 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
             _, engaging, sent = submit_frame(controller, mock, cmd, eta, session_over,
                                              range_m=range_m, path_m=path_m,
                                              confirmed=tracked is not None)
-            result.decisions.append((round(result.time_s, 2), round(heading, 2),
-                                     None if eta is None else round(eta, 2), cmd.action,
-                                     _round(range_m), _round(path_m), _round(seen),
-                                     _round(tracked), rule))
+            result.decisions.append(FrameDecision(
+                round(result.time_s, 2), round(heading, 2),
+                None if eta is None else round(eta, 2), cmd.action, _round(range_m),
+                _round(path_m), _round(seen), _round(tracked), rule))
             if controller.state.name == "active":
                 if sent is not None and not engaging:  # the engaging frame waited: no latency
                     result.setpoint_ms.append((sent - t_wall) * 1e3)
@@ -654,6 +667,7 @@ def summarize(results: Sequence[tuple[Approach, RunResult]], policy: str, seed: 
     return {
         "scenario": "approach", "policy": policy, "renderer": renderer, "seed": seed,
         "eye_level": eye_level, "manhattan": manhattan, "runs": n,
+        "decision_fields": list(FrameDecision._fields),
         "passed": count["passed"], "collisions": count["collision"],
         "timeouts": count["timeout"], "errors": count["error"],
         "collision_free_rate": round((n - count["collision"] - count["error"]) / n, 4)

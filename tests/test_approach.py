@@ -16,6 +16,7 @@ from companion.vision.obstacles import RULES
 from sitl.approach import (
     BODY_RADIUS_M,
     WALL_GAP_M,
+    FrameDecision,
     FrameMap,
     draw_approach,
     first_contact,
@@ -164,8 +165,9 @@ def test_the_pipeline_flies_past_an_obstacle_at_eye_level():
     assert r.outcome == "passed", r
     low, high = r.top_above_camera_m
     assert -0.1 < low <= high < 0.3
-    seen = [d for d in r.decisions if d[2] is not None]
-    assert r.decisions[0][2] is not None and len(seen) >= 3 and r.max_turn_deg > 20.0
+    seen = [d for d in r.decisions if d.eta_steered_deg is not None]
+    assert r.decisions[0].eta_steered_deg is not None and len(seen) >= 3
+    assert r.max_turn_deg > 20.0
 
 
 def test_a_run_starts_to_fly_the_same_way_every_time(monkeypatch):
@@ -209,16 +211,16 @@ def test_the_pipeline_flies_past_and_the_figures_are_written(tmp_path):
     assert figures["frame_to_setpoint_ms"]["median"] is not None
     assert plot.stat().st_size > 5000
     assert all(r["speed_m_s"] == 0.6 for r in figures["per_run"])
-    # The pipeline measured range at the altitude the autopilot reported, as in flight:
-    # (t, heading, η, action, range_m, path_m, frame's η, tracked η, rule) per frame.
-    decisions = [d for r in figures["per_run"] for d in r["decisions"]]
-    ranges = [d[4] for d in decisions if d[2] is not None]
+    # The pipeline measured range at the altitude the autopilot reported, as in flight.
+    assert figures["decision_fields"] == list(FrameDecision._fields)
+    decisions = [FrameDecision(*d) for r in figures["per_run"] for d in r["decisions"]]
+    ranges = [d.range_m for d in decisions if d.eta_steered_deg is not None]
     measured = [x for x in ranges if x is not None]
     assert measured and all(x > 0.5 for x in measured)  # nearer is below the view
     # Steered by the frame's η (the default), each read by a rule of the obstacle stage.
-    assert all(d[2] == d[6] for d in decisions)
-    assert all(d[8] in RULES for d in decisions if d[6] is not None)
-    assert any(d[7] is not None for d in decisions)  # and the tracker confirmed some
+    assert all(d.eta_steered_deg == d.eta_deg for d in decisions)
+    assert all(d.rule in RULES for d in decisions if d.eta_deg is not None)
+    assert any(d.eta_tracked_deg is not None for d in decisions)  # the tracker confirmed some
 
 
 def test_the_path_traced_room_is_the_runs_room():
@@ -252,7 +254,7 @@ def test_the_pipeline_flies_a_path_traced_room():
     # takes it out of view (3 to 11 frames over repeated flights). The first frame, the
     # box 8 m off and 28 px wide, is not required: until e032d43 it gave η 1.9° there
     # (true 28.5°) from one corner at which a face would be edge-on.
-    seen = [d for d in r.decisions if d[2] is not None]
+    seen = [d for d in r.decisions if d.eta_steered_deg is not None]
     assert len(seen) >= 3 and r.max_turn_deg > 8.0
 
 
