@@ -96,7 +96,8 @@ class PolicyConfig:
     resume_after_s: float = field(default=1.0, metadata=_range(0.0, 60.0))
     resume_max_rate_deg_s: float = field(default=10.0, metadata=_range(0.5, 90.0))
     # Once the pass-off is taken on one side of the course, frames asking for the other
-    # side are not acted on until the vehicle is back on the course (policy.keeps_side).
+    # side are not acted on until the vehicle is back on the course and past the last
+    # obstacle foot measured (policy.keeps_side).
     keep_pass_side: bool = True
     # Range (camera height known): obstacles beyond act_within_m are not turned for; one in
     # the flight path closer than slow_within_m slows the vehicle, to a stop at

@@ -26,10 +26,12 @@ paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
   aligns with it, and the vehicle clipped the obstacle;
 - the side kept: once a pass-off has been taken on one side of the course, a frame that
   would take it on the other side is not acted on until the vehicle is back on the
-  course (without ``resume_course``: until the obstacle is passed), unless the frame
-  measures an obstacle in the flight path (:func:`keeps_side`). Beside a box just
-  passed, one wrong reading (a rug's corner over a floor seam, read as the box's foot)
-  otherwise turned the vehicle across the course into it;
+  course (without ``resume_course``: until the obstacle is passed) and, if an obstacle's
+  foot was measured, has flown past it along the course, unless the frame measures an
+  obstacle in the flight path (:func:`keeps_side`). Beside a box just passed, one wrong
+  reading (a rug's corner over a floor seam, read as the box's foot) otherwise turned
+  the vehicle across the course into it; and a vehicle that lost the box from view while
+  turning away resumed the course short of it, saw its other face, and turned into it;
 - optionally (``unconfirmed: ranged``), a detection confirmed: a frame's η the tracker has
   not confirmed sets no heading until its obstacle's floor contact is measured
   (:func:`turns_for`); it still counts as an obstacle in view, so the course does not
@@ -158,7 +160,8 @@ def pass_side(eta_deg: float, heading_deg: float, course_deg: float) -> int:
 def keeps_side(side: int, kept_side: int, path_m: float | None,
                policy: PolicyConfig) -> bool:
     """Whether a frame that would pass on ``side`` (:func:`pass_side`) is held back, the
-    pass-off having been taken on ``kept_side`` (0: none since the course was last flown):
+    pass-off having been taken on ``kept_side`` (0: none since the course was last flown
+    past the obstacle, ``supervisor.supervise``):
     with ``keep_pass_side``, a frame asking for the other side is held back unless it
     measures an obstacle in the flight path near enough to slow the vehicle
     (``path_m``, m; None: not measured; :func:`path_speed_scale`). The pass-off side was

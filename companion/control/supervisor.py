@@ -22,7 +22,8 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   (:func:`yaw_rate_setpoint`), as in the paper's Table IV;
 - yaw rate, flying forward: toward the heading Table II asks for, at least
   ``policy.min_avoid_deg`` off the course (the heading offboard engaged with), on the
-  side first taken until the vehicle is back on the course (``policy.keep_pass_side``),
+  side first taken until the vehicle is back on the course and past the last obstacle
+  foot measured, if any (``policy.keep_pass_side``),
   and back to the course once no obstacle has been seen for ``policy.resume_after_s``
   (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``). A frame whose
   scene is not understood (``hold``) stops the vehicle but not this turn, which rests on
@@ -113,6 +114,9 @@ class SupervisorState:
     path_m: float | None = None  # the nearest obstacle in the path, dead-reckoned to now
     path_t_s: float | None = None  # the decision that measured it
     flown_since_seen_m: float = 0.0  # forward distance streamed since obstacle_t_s
+    course_progress_m: float = 0.0  # flown along the course since offboard engaged
+    foot_abeam_m: float | None = None  # course_progress_m at which the last obstacle foot
+    #                                   measured is abeam at the latest (its range ahead)
 
 
 @dataclass(frozen=True)
@@ -211,12 +215,16 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         # flew to pass it and its side belong to another course and place in the room.
         mem = replace(prev, **_FORGOTTEN_ON_ENGAGING) if engaged_now else prev
         keep = {"obstacle_t_s": mem.obstacle_t_s, "target_deg": mem.target_deg,
-                "target_from_t_s": mem.target_from_t_s, "pass_side": mem.pass_side}
+                "target_from_t_s": mem.target_from_t_s, "pass_side": mem.pass_side,
+                "foot_abeam_m": mem.foot_abeam_m}
         if config.forward_speed_m_s > 0.0:
             path, path_t = path_ahead(mem, decision, fresh, now_s, flown_m)
             keep = {**keep, "path_m": path, "path_t_s": path_t}
             forward = min(forward, config.forward_speed_m_s * path_speed_scale(path, policy))
         if config.forward_speed_m_s > 0.0 and course is not None and vehicle.yaw_deg is not None:
+            progress = mem.course_progress_m + flown_m * math.cos(
+                math.radians(wrap_deg(vehicle.yaw_deg - course)))
+            keep["course_progress_m"] = progress
             keep = _pass_target(keep, decision, fresh, course, policy)
             target, seen_t = keep.get("target_deg"), keep.get("obstacle_t_s")
             flown = 0.0 if seen_t != mem.obstacle_t_s else mem.flown_since_seen_m + flown_m
@@ -227,9 +235,14 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
             passed = seen_t is None or (
                 now_s - seen_t >= policy.resume_after_s
                 and flown >= policy.resume_after_s * config.forward_speed_m_s - 1e-9)
-            if passed and (not policy.resume_course
-                           or abs(wrap_deg(course - vehicle.yaw_deg)) <= policy.deadband_deg):
-                keep["pass_side"] = 0  # back on the course: the next obstacle picks anew
+            foot = keep.get("foot_abeam_m")
+            if (passed and (foot is None or progress >= foot)
+                    and (not policy.resume_course
+                         or abs(wrap_deg(course - vehicle.yaw_deg)) <= policy.deadband_deg)):
+                # Back on the course and past the last foot measured: the next obstacle
+                # picks anew. A vehicle that turned away lost the obstacle from view before
+                # passing it, and back on the course it may see the obstacle's other face.
+                keep["pass_side"], keep["foot_abeam_m"] = 0, None
             rate = 0.0
             if fresh:  # also in hold: the heading comes from telemetry, not this frame
                 if policy.resume_course and passed:
@@ -294,7 +307,8 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
 
 _FORGOTTEN_ON_ENGAGING = {"obstacle_t_s": None, "target_deg": None, "target_from_t_s": None,
                           "pass_side": 0, "path_m": None, "path_t_s": None,
-                          "flown_since_seen_m": 0.0}
+                          "flown_since_seen_m": 0.0, "course_progress_m": 0.0,
+                          "foot_abeam_m": None}
 
 
 def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg: float,
@@ -311,6 +325,9 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
     if (not fresh or decision is None or decision.eta_deg is None
             or not obstacle_matters(decision.range_m, policy)):
         return keep
+    if decision.range_m is not None and decision.t_s != keep.get("obstacle_t_s"):
+        # A foot range_m away is abeam once that far has been flown along the course.
+        keep["foot_abeam_m"] = keep.get("course_progress_m", 0.0) + decision.range_m
     keep = {**keep, "obstacle_t_s": decision.t_s}
     if (decision.heading_deg is None or decision.t_s == keep.get("target_from_t_s")
             or not turns_for(decision.confirmed, decision.range_m, policy)):
