@@ -313,7 +313,8 @@ _FORGOTTEN_ON_ENGAGING = {"obstacle_t_s": None, "target_deg": None, "target_from
 
 def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg: float,
                  policy: PolicyConfig) -> dict:
-    """The heading target and when an obstacle was last seen, after a new decision.
+    """The heading target, when an obstacle was last seen and where its foot, if measured,
+    is abeam (``foot_abeam_m``, in ``course_progress_m``), after a new decision.
 
     A decision that turns (or sees the face aligned, within the deadband) sets the target
     from its η and heading; one whose turn the reversal rule held back (``forward`` with
@@ -327,7 +328,7 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
         return keep
     if decision.range_m is not None and decision.t_s != keep.get("obstacle_t_s"):
         # A foot range_m away is abeam once that far has been flown along the course.
-        keep["foot_abeam_m"] = keep.get("course_progress_m", 0.0) + decision.range_m
+        keep = {**keep, "foot_abeam_m": keep.get("course_progress_m", 0.0) + decision.range_m}
     keep = {**keep, "obstacle_t_s": decision.t_s}
     if (decision.heading_deg is None or decision.t_s == keep.get("target_from_t_s")
             or not turns_for(decision.confirmed, decision.range_m, policy)):
