@@ -452,18 +452,20 @@ def test_a_new_engagement_flies_nothing_an_earlier_one_saw():
 
 
 def test_the_side_is_kept_back_on_the_course_until_the_foot_measured_is_abeam():
-    step = cruising()  # course 0°, 1 m/s, 3 m flown along it
+    step = cruising()  # course 0°, ramped up to 1 m/s over 3 s: about 2 m along it
     # A face 20° left, its foot measured 5 m ahead: pass left, at min_avoid_deg.
     step = fly(step.state, Decision(3.0, TurnCommand("left", -20.0, -20.0), -20.0, 0.0,
                                     range_m=5.0, path_m=float("inf")), 3.0)
     assert step.state.pass_side == -1 and step.state.target_deg == -POLICY.min_avoid_deg
-    # Out of view for 2 s, then 2 s back toward the course: about 3.6 m along it.
+    foot_m = step.state.course_progress_m + 5.0
+    assert step.state.foot_abeam_m == pytest.approx(foot_m)
+    # Out of view for 2 s, then 2 s back toward the course: about 3.6 m more along it.
     t = 3.0
     while t < 7.0:
         t = round(t + 0.05, 2)
         yaw = -POLICY.min_avoid_deg if t < 5.0 else min(0.0, -30.0 + 15.0 * (t - 5.0))
         step = fly(step.state, Decision(t, FORWARD), t, yaw_deg=yaw)
-    assert step.state.course_progress_m < 3.0 + 5.0 and step.state.pass_side == -1
+    assert step.state.course_progress_m < foot_m and step.state.pass_side == -1
     # Back on the course short of the foot, a frame reads the obstacle's other face (a
     # right turn toward it): held back; the pass-off heading is flown again.
     step = fly(step.state, Decision(7.05, TurnCommand("right", 26.0, 26.0), 26.0, 0.0,
