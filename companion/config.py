@@ -95,6 +95,9 @@ class PolicyConfig:
     resume_course: bool = True
     resume_after_s: float = field(default=1.0, metadata=_range(0.0, 60.0))
     resume_max_rate_deg_s: float = field(default=10.0, metadata=_range(0.5, 90.0))
+    resume_clearance_m: float = field(default=0.5, metadata=_range(0.0, 5.0))
+    """the course does not resume while the predicted resume passes nearer than this to a
+    floor contact measured earlier (policy.resume_path_clearance_m); 0: the rule off"""
     # Once the pass-off is taken on one side of the course, frames asking for the other
     # side are not acted on until the vehicle is back on the course and past the last
     # obstacle foot measured (policy.keeps_side).

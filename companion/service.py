@@ -104,7 +104,8 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
                               est, config.mavlink.obstacle_distance_increment_deg),
                           range_m=est.range_m,
                           path_m=est.path_m(config.policy.path_half_width_m),
-                          confirmed=est.eta_tracked_deg is not None)
+                          confirmed=est.eta_tracked_deg is not None,
+                          contacts_m=est.contacts_ahead_right_m)
         now = time.monotonic()
         health.decisions += 1
         health.last_decision_s = now

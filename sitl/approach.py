@@ -502,15 +502,16 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
                 image = cv2.remap(image, *lens, cv2.INTER_LINEAR,
                                   borderMode=cv2.BORDER_REPLICATE)
             t0 = time.perf_counter()  # the frame is taken: decide
-            seen, tracked, understood, range_m, path_m, rule = _observe(policy, scene, cam,
-                                                                        pipeline, image)
+            seen, tracked, understood, range_m, path_m, rule, contacts = _observe(
+                policy, scene, cam, pipeline, image)
             eta, cmd, history = decide_frame(seen, tracked, cfg.policy, history, understood,
                                              range_m)
             result.decision_ms.append((time.perf_counter() - t0) * 1e3)
             t_wall = time.monotonic()
             _, engaging, sent = submit_frame(controller, mock, cmd, eta, session_over,
                                              range_m=range_m, path_m=path_m,
-                                             confirmed=tracked is not None)
+                                             confirmed=tracked is not None,
+                                             contacts_m=contacts)
             result.decisions.append(FrameDecision(
                 round(result.time_s, 2), round(heading, 2),
                 None if eta is None else round(eta, 2), cmd.action, _round(range_m),
@@ -534,10 +535,11 @@ def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None
 
 def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray | None
              ) -> tuple[float | None, float | None, bool, float | None, float | None,
-                        str | None]:
+                        str | None, tuple[tuple[float, float], ...]]:
     """η and the tracked η (or None), whether the scene was understood, the range and
-    path distance (:class:`~companion.control.supervisor.Decision`), and the rule that read
-    the frame's obstacle (``Obstacle.rule``; None without one), as the policy sees the
+    path distance (:class:`~companion.control.supervisor.Decision`), the rule that read
+    the frame's obstacle (``Obstacle.rule``; None without one) and the floor contacts
+    (``Estimate.contacts_ahead_right_m``), as the policy sees the
     frame (``image``: the rendered frame, for ``paper``, measured at the camera height the
     autopilot reports, as the service does). The oracle knows no range, and turns only for
     a rotated obstacle in view (not for the square one of ``--manhattan``); its true η is
@@ -546,12 +548,12 @@ def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray
         est = pipeline(image, camera_height_m=cam.height_m)
         return (est.eta_deg, est.eta_tracked_deg, est.scene_understood, est.range_m,
                 est.path_m(pipeline.config.policy.path_half_width_m),
-                est.obstacles[0].rule if est.obstacles else None)
+                est.obstacles[0].rule if est.obstacles else None, est.contacts_ahead_right_m)
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
         eta = truth.eta_deg if truth.corners_px and truth.non_manhattan else None
-        return eta, eta, True, None, None, None
-    return None, None, True, None, None, None
+        return eta, eta, True, None, None, None, ()
+    return None, None, True, None, None, None, ()
 
 
 def _round(x: float | None) -> float | str | None:

@@ -177,3 +177,29 @@ def test_a_frame_asking_for_the_other_side_is_held_back_unless_the_path_is_block
     assert keeps_side(-1, 1, math.inf, p)  # measured: the path is clear
     assert not keeps_side(-1, 1, 3.0, p)  # something in the path: the side may change
     assert not keeps_side(-1, 1, None, PolicyConfig(keep_pass_side=False))
+
+
+def test_the_resume_is_predicted_as_flown_a_circle_at_the_capped_rate_then_straight():
+    from companion.control.policy import resume_path_clearance_m
+
+    p = PolicyConfig(turn_time_s=1.0, deadband_deg=3.0, resume_max_rate_deg_s=10.0)
+    assert resume_path_clearance_m((), 0.0, 0.0, 30.0, 1.0, p) == math.inf
+    # On the course already: a straight line along it, 8 m long (the horizon at 1 m/s).
+    assert resume_path_clearance_m(((3.0, 0.8),), 1.0, 0.5, 0.0, 1.0, p) == pytest.approx(0.3)
+    assert resume_path_clearance_m(((-1.0, 0.5),), 1.0, 0.5, 0.0, 1.0, p) == pytest.approx(2.0)
+    assert resume_path_clearance_m(((20.0, 0.5),), 1.0, 0.5, 0.0, 1.0, p) == pytest.approx(11.0)
+    # 30° right of it: back left at 10°/s while 10° or more off, a circle of radius
+    # v / ω (5.73 m at 1 m/s) about a centre on its left; from 10° on the turn slows and
+    # the path leaves the circle outward.
+    radius = 1.0 / math.radians(10.0)
+    h0, h = math.radians(30.0), math.radians(10.0)
+    centre = (radius * math.sin(h0), -radius * math.cos(h0))
+    assert resume_path_clearance_m((centre,), 0.0, 0.0, 30.0, 1.0, p) == pytest.approx(
+        radius, abs=0.05)
+    # A foot on the arc where the heading is 10° off, and one 0.3 m inside it at 20°.
+    on_arc = (radius * (math.sin(h0) - math.sin(h)), radius * (math.cos(h) - math.cos(h0)))
+    assert resume_path_clearance_m((on_arc,), 0.0, 0.0, 30.0, 1.0, p) < 0.05
+    inside = (centre[0] - (radius - 0.3) * math.sin(math.radians(20.0)),
+              centre[1] + (radius - 0.3) * math.cos(math.radians(20.0)))
+    assert resume_path_clearance_m((inside,), 0.0, 0.0, 30.0, 1.0, p) == pytest.approx(
+        0.3, abs=0.02)

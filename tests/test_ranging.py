@@ -112,6 +112,14 @@ def test_the_pipeline_measures_the_range_of_a_rendered_box(pitch, roll):
                                            c[1] - est.contact.pixel[1]))
     assert truth.obstacles[0].floor_corners
     assert est.range_m == pytest.approx(nearest[2], rel=0.05)
+    # What the supervisor remembers: every contact, ahead and right of the camera, the
+    # nearest the range, on the side of the image it was seen on.
+    flat = [c for contacts in est.obstacle_contacts for c in contacts]
+    assert len(est.contacts_ahead_right_m) == len(flat) >= 1
+    assert min(math.hypot(*c) for c in est.contacts_ahead_right_m) == pytest.approx(est.range_m)
+    for (ahead, right), c in zip(est.contacts_ahead_right_m, flat, strict=True):
+        assert ahead > 0.0  # pitch turns the image about its x axis: the side is the same
+        assert roll != 0.0 or (right > 0.0) == (c.pixel[0] > image.shape[1] / 2)
 
 
 def test_no_height_no_range():

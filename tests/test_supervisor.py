@@ -1,5 +1,6 @@
 """The offboard state machine and the yaw-rate budget, on values alone (no MAVSDK)."""
 
+import math
 from dataclasses import replace
 
 import pytest
@@ -477,3 +478,71 @@ def test_the_side_is_kept_back_on_the_course_until_the_foot_measured_is_abeam():
         t = round(t + 0.05, 2)
         step = fly(step.state, Decision(t, FORWARD), t)
     assert abeam_m <= step.state.course_progress_m <= abeam_m + 0.05
+
+
+def test_floor_contacts_are_remembered_in_the_course_frame_and_forgotten_once_behind():
+    from companion.control.supervisor import remembered_contacts
+
+    state = SupervisorState("active", True, contacts_m=((0.5, 0.0), (3.0, 1.0)))
+    # A frame taken facing 90° right of the course (0°), the vehicle 1 m along it and 2 m
+    # right: a foot 2 m ahead and 1 m right of the camera is 1 m back along the course and
+    # 4 m right of it; one 7 m away is beyond act_within_m (6 m): not remembered.
+    decision = Decision(1.0, FORWARD, heading_deg=90.0, contacts_m=((2.0, 1.0), (7.0, 0.0)))
+    contacts, since = remembered_contacts(state, decision, True, 0.0, 1.0, 2.0, POLICY)
+    assert since == 1.0 and contacts[:2] == ((0.5, 0.0), (3.0, 1.0))  # 0.5 m behind: kept
+    assert len(contacts) == 3 and contacts[2] == pytest.approx((0.0, 4.0))
+    # The same decision at the next tick adds nothing; 1.6 m on, the one 0.5 m along the
+    # course is more than resume_clearance_m behind: forgotten.
+    moved = replace(state, contacts_m=contacts, contacts_t_s=since)
+    later, _ = remembered_contacts(moved, decision, True, 0.0, 1.6, 2.0, POLICY)
+    assert later == ((3.0, 1.0),)
+    # Stale vision, or no heading for the frame: nothing is added.
+    assert remembered_contacts(state, decision, False, 0.0, 1.0, 2.0, POLICY)[1] is None
+    assert remembered_contacts(state, replace(decision, heading_deg=None), True, 0.0, 1.0,
+                               2.0, POLICY)[0] == ((0.5, 0.0), (3.0, 1.0))
+
+
+def resume_past(contacts, policy=POLICY):
+    """Cruise along 0°, see a face 40° right with ``contacts`` (ahead, right of the camera,
+    m) at 3 s, fly the pass-off heading (30°) with nothing more in view, and return the
+    time the vehicle starts back toward the course and the state then."""
+    step = cruising()
+    step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, contacts_m=contacts), 3.0,
+               policy=policy)
+    assert step.state.target_deg == 30.0
+    t = 3.0
+    while t < 20.0:
+        t = round(t + 0.05, 2)
+        step = fly(step.state, Decision(t, FORWARD), t, yaw_deg=30.0, policy=policy)
+        if step.yaw_rate_deg_s < 0.0:
+            return t, step.state
+        assert step.yaw_rate_deg_s == 0.0  # the pass-off heading is held
+    raise AssertionError("never resumed")
+
+
+def test_the_course_resumes_only_on_a_path_clear_of_the_feet_measured_earlier():
+    from companion.control.policy import resume_path_clearance_m
+
+    clear_t, _ = resume_past(())
+    assert clear_t == pytest.approx(3.0 + POLICY.resume_after_s, abs=0.06)
+    # Feet beside the course the vehicle is leaving: the resume's path stays clear of them.
+    assert resume_past(((3.0, -1.0), (4.0, -0.5)))[0] == clear_t
+    # A box rotated away from the course: its near foot 2.5 m ahead, its far one 4.5 m
+    # ahead and 1.3 m right, where the path back from the pass-off heading would cross.
+    far = (4.5, 1.3)
+    t, state = resume_past(((2.5, 0.2), far))
+    assert t > clear_t + 0.5
+    # It resumed once the predicted path kept resume_clearance_m from the far foot ...
+    along, across = state.course_progress_m, state.course_offset_m
+    foot = (2.0 + far[0], far[1])  # the vehicle was 2 m along the course when it saw it
+    assert state.contacts_m[-1] == pytest.approx(foot, abs=0.05)
+    assert resume_path_clearance_m((foot,), along, across, 30.0, FLY.forward_speed_m_s,
+                                   POLICY) >= POLICY.resume_clearance_m
+    # ... and held the pass-off heading one tick before, when it did not.
+    back = 1.0 * 0.05  # one tick at 1 m/s, on the pass-off heading
+    assert resume_path_clearance_m(
+        (foot,), along - back * math.cos(math.radians(30.0)),
+        across - back * math.sin(math.radians(30.0)), 30.0, FLY.forward_speed_m_s,
+        POLICY) < POLICY.resume_clearance_m
+    # With the rule off, the course resumes at the usual time.
+    assert resume_past(((2.5, 0.2), far), replace(POLICY, resume_clearance_m=0.0))[0] == clear_t

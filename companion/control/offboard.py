@@ -124,15 +124,17 @@ class OffboardController:
                t_s: float | None = None,
                obstacle_distance: ObstacleDistance | None = None,
                range_m: float | None = None, path_m: float | None = None,
-               confirmed: bool = True) -> None:
+               confirmed: bool = True,
+               contacts_m: tuple[tuple[float, float], ...] = ()) -> None:
         """Hand over the newest decision (``t_s``: when its frame was taken, on ``clock``).
         It carries the heading the autopilot reports now, the frame's a few ms ago, the
-        frame's OBSTACLE_DISTANCE sectors, if it measured any, its ranges and whether the
-        tracker confirmed its obstacle (:class:`~companion.control.supervisor.Decision`)."""
+        frame's OBSTACLE_DISTANCE sectors, if it measured any, its ranges, whether the
+        tracker confirmed its obstacle and its floor contacts
+        (:class:`~companion.control.supervisor.Decision`)."""
         pose = self.pose
         decision = sv.Decision(self.clock() if t_s is None else t_s, command, eta_deg,
                                None if pose is None else pose.yaw_deg, range_m, path_m,
-                               confirmed)
+                               confirmed, contacts_m)
         with self._lock:
             self._decision = decision
             self._obstacle_distance = (decision.t_s, obstacle_distance)

@@ -59,11 +59,14 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 from companion.config import PolicyConfig
 
 __all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
            "decide_frame", "decide_turn", "heading_rate", "keeps_side", "obstacle_matters",
-           "pass_side", "path_speed_scale", "steering_eta", "turns_for", "wrap_deg"]
+           "pass_side", "path_speed_scale", "resume_path_clearance_m", "steering_eta", "turns_for",
+           "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
@@ -187,6 +190,41 @@ def avoidance_heading(eta_deg: float, heading_deg: float, course_deg: float,
     turn = wrap_deg(course_deg + offset - heading_deg)
     turn = math.copysign(min(abs(turn), policy.max_turn_deg), turn)
     return wrap_deg(heading_deg + turn)
+
+
+RESUME_HORIZON_S = 8.0
+"""How far ahead :func:`resume_path_clearance_m` predicts the resume: from 45° off the
+course at ``resume_max_rate_deg_s`` (10°/s) the heading is back on it in about 5 s; the
+rest is the straight flight after it."""
+
+
+def resume_path_clearance_m(contacts_m: tuple[tuple[float, float], ...], along_m: float,
+                            across_m: float, heading_off_deg: float, speed_m_s: float,
+                            policy: PolicyConfig, horizon_s: float = RESUME_HORIZON_S,
+                            dt_s: float = 0.1) -> float:
+    """The nearest the resume would pass to a remembered floor contact (m; inf: none).
+
+    ``contacts_m``: floor contacts seen earlier, each (metres along the course, metres
+    right of it) in the frame whose origin is where offboard engaged; the vehicle is at
+    (``along_m``, ``across_m``) with its heading ``heading_off_deg`` right of the course.
+    The resume is predicted as :func:`heading_rate` flies it back to the course, at most
+    ``resume_max_rate_deg_s``, at ``speed_m_s``, for ``horizon_s``, the position sampled
+    every ``dt_s``. Not in the paper: a vehicle that lost an obstacle from view while
+    turning away from it resumed the course into it, where its feet had been measured
+    (docs/flight.md).
+    """
+    if not contacts_m:
+        return math.inf
+    path = [(along_m, across_m)]
+    heading = heading_off_deg
+    for _ in range(max(1, round(horizon_s / dt_s))):
+        heading += heading_rate(0.0, heading, policy, policy.resume_max_rate_deg_s) * dt_s
+        h = math.radians(heading)
+        along_m += speed_m_s * dt_s * math.cos(h)
+        across_m += speed_m_s * dt_s * math.sin(h)
+        path.append((along_m, across_m))
+    gaps = np.asarray(path)[:, None, :] - np.asarray(contacts_m, float)[None, :, :]
+    return float(np.sqrt((gaps ** 2).sum(axis=2)).min())
 
 
 def heading_rate(target_deg: float, heading_deg: float, policy: PolicyConfig,

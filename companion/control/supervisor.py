@@ -25,8 +25,11 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   side first taken until the vehicle is back on the course and past the last obstacle
   foot measured, if any (``policy.keep_pass_side``),
   and back to the course once no obstacle has been seen for ``policy.resume_after_s``
-  (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``). A frame whose
-  scene is not understood (``hold``) stops the vehicle but not this turn, which rests on
+  (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``), unless the
+  path back (predicted by ``policy.resume_path_clearance_m``) would pass within
+  ``policy.resume_clearance_m`` of a floor contact measured earlier
+  (:func:`remembered_contacts`): then the pass-off heading is held. A frame whose scene
+  is not understood (``hold``) stops the vehicle but not this turn, which rests on
   earlier frames and the reported heading: stopped and still, the view would never change;
 - forward speed (:func:`forward_speed_setpoint`): ``offboard.forward_speed_m_s`` while
   the scene is understood, also during a turn (less ``turn_slowdown`` × the share of
@@ -57,13 +60,15 @@ from companion.control.policy import (
     obstacle_matters,
     pass_side,
     path_speed_scale,
+    resume_path_clearance_m,
     turns_for,
     wrap_deg,
 )
 
 __all__ = [
     "Decision", "Step", "SupervisorState", "VehicleStatus", "enable", "forward_speed_setpoint",
-    "initial_state", "path_ahead", "supervise", "turn_ends_at", "yaw_rate_setpoint",
+    "initial_state", "path_ahead", "remembered_contacts", "supervise", "turn_ends_at",
+    "yaw_rate_setpoint",
 ]
 
 StateName = Literal["disabled", "waiting", "engaging", "active", "link_lost"]
@@ -95,6 +100,8 @@ class Decision:
     path_m: float | None = None  # to the nearest obstacle in the path; inf: none; None: not
     #                              measured (ranging.path_distance)
     confirmed: bool = True  # the tracker confirms the obstacle (policy.turns_for)
+    contacts_m: tuple[tuple[float, float], ...] = ()  # the obstacles' floor contacts, m
+    #                                    ahead and right of the camera (ranging.FloorContact)
 
 
 @dataclass(frozen=True)
@@ -117,6 +124,10 @@ class SupervisorState:
     course_progress_m: float = 0.0  # flown along the course since offboard engaged
     foot_abeam_m: float | None = None  # course_progress_m at which the last obstacle foot
     #                                   measured is abeam at the latest (its range ahead)
+    course_offset_m: float = 0.0  # flown right of the course since offboard engaged
+    contacts_m: tuple[tuple[float, float], ...] = ()  # floor contacts measured and not yet
+    #                  passed: (course_progress_m, course_offset_m) of each, dead-reckoned
+    contacts_t_s: float | None = None  # the decision that last added to them
 
 
 @dataclass(frozen=True)
@@ -222,9 +233,12 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
             keep = {**keep, "path_m": path, "path_t_s": path_t}
             forward = min(forward, config.forward_speed_m_s * path_speed_scale(path, policy))
         if config.forward_speed_m_s > 0.0 and course is not None and vehicle.yaw_deg is not None:
-            progress = mem.course_progress_m + flown_m * math.cos(
-                math.radians(wrap_deg(vehicle.yaw_deg - course)))
-            keep["course_progress_m"] = progress
+            off_course = wrap_deg(vehicle.yaw_deg - course)
+            progress = mem.course_progress_m + flown_m * math.cos(math.radians(off_course))
+            offset = mem.course_offset_m + flown_m * math.sin(math.radians(off_course))
+            keep["course_progress_m"], keep["course_offset_m"] = progress, offset
+            keep["contacts_m"], keep["contacts_t_s"] = remembered_contacts(
+                mem, decision, fresh, course, progress, offset, policy)
             keep = _pass_target(keep, decision, fresh, course, policy)
             target, seen_t = keep.get("target_deg"), keep.get("obstacle_t_s")
             flown = 0.0 if seen_t != mem.obstacle_t_s else mem.flown_since_seen_m + flown_m
@@ -235,6 +249,12 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
             passed = seen_t is None or (
                 now_s - seen_t >= policy.resume_after_s
                 and flown >= policy.resume_after_s * config.forward_speed_m_s - 1e-9)
+            # ... and not onto a path that passes an obstacle foot measured earlier: the
+            # obstacle left the view, not the room.
+            blocked = (passed and policy.resume_course and policy.resume_clearance_m > 0.0
+                       and resume_path_clearance_m(keep["contacts_m"], progress, offset,
+                                                   off_course, config.forward_speed_m_s, policy)
+                       < policy.resume_clearance_m)
             foot = keep.get("foot_abeam_m")
             if (passed and (foot is None or progress >= foot)
                     and (not policy.resume_course
@@ -245,7 +265,7 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
                 keep["pass_side"], keep["foot_abeam_m"] = 0, None
             rate = 0.0
             if fresh:  # also in hold: the heading comes from telemetry, not this frame
-                if policy.resume_course and passed:
+                if policy.resume_course and passed and not blocked:
                     rate = heading_rate(course, vehicle.yaw_deg, policy,
                                         policy.resume_max_rate_deg_s)
                 elif target is not None:
@@ -308,7 +328,8 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
 _FORGOTTEN_ON_ENGAGING = {"obstacle_t_s": None, "target_deg": None, "target_from_t_s": None,
                           "pass_side": 0, "path_m": None, "path_t_s": None,
                           "flown_since_seen_m": 0.0, "course_progress_m": 0.0,
-                          "foot_abeam_m": None}
+                          "foot_abeam_m": None, "course_offset_m": 0.0, "contacts_m": (),
+                          "contacts_t_s": None}
 
 
 def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg: float,
@@ -342,6 +363,38 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
         keep["target_from_t_s"] = decision.t_s
         keep["pass_side"] = side
     return keep
+
+
+CONTACT_MEMORY = 256
+"""At most this many floor contacts are remembered, the newest: a foot seen on every frame
+of a few seconds' approach is a few dozen."""
+
+
+def remembered_contacts(prev: SupervisorState, decision: Decision | None, fresh: bool,
+                        course_deg: float, along_m: float, across_m: float,
+                        policy: PolicyConfig
+                        ) -> tuple[tuple[tuple[float, float], ...], float | None]:
+    """The floor contacts to remember at this tick, each (metres along the course, metres
+    right of it) from where offboard engaged, and the decision that last added to them.
+
+    The vehicle is at (``along_m``, ``across_m``), dead-reckoned. A new fresh decision
+    taken at a known heading adds its contacts (``Decision.contacts_m``), those within
+    ``act_within_m`` (nearer ones are measured better: the range error grows with its
+    square); a contact farther behind the vehicle than ``resume_clearance_m`` is
+    forgotten, as no path ahead can pass nearer to it; at most :data:`CONTACT_MEMORY`.
+    """
+    kept = [c for c in prev.contacts_m if c[0] >= along_m - policy.resume_clearance_m]
+    since = prev.contacts_t_s
+    if (fresh and decision is not None and decision.t_s != since
+            and decision.heading_deg is not None):
+        since = decision.t_s
+        b = math.radians(wrap_deg(decision.heading_deg - course_deg))
+        for ahead, right in decision.contacts_m:
+            if policy.act_within_m > 0.0 and math.hypot(ahead, right) > policy.act_within_m:
+                continue
+            kept.append((along_m + ahead * math.cos(b) - right * math.sin(b),
+                         across_m + ahead * math.sin(b) + right * math.cos(b)))
+    return tuple(kept[-CONTACT_MEMORY:]), since
 
 
 PATH_MEMORY_S = 2.0

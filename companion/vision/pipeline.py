@@ -262,6 +262,12 @@ class Estimate:
         return min(first, key=lambda c: c.range_m) if first else None
 
     @property
+    def contacts_ahead_right_m(self) -> tuple[tuple[float, float], ...]:
+        """Every obstacle's floor contacts, each (m ahead of the camera, m to its right);
+        empty when none is measured."""
+        return tuple(c.ahead_right_m for contacts in self.obstacle_contacts for c in contacts)
+
+    @property
     def range_m(self) -> float | None:
         """Horizontal distance to the primary obstacle's floor contact, metres."""
         return None if self.contact is None else self.contact.range_m
