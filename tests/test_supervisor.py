@@ -546,3 +546,18 @@ def test_the_course_resumes_only_on_a_path_clear_of_the_feet_measured_earlier():
         POLICY) < POLICY.resume_clearance_m
     # With the rule off, the course resumes at the usual time.
     assert resume_past(((2.5, 0.2), far), replace(POLICY, resume_clearance_m=0.0))[0] == clear_t
+
+
+def test_back_on_the_course_a_foot_measured_in_its_path_turns_it_to_the_pass_off_again():
+    step = cruising()  # course 0°, about 2 m along it
+    step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, contacts_m=((5.0, 0.0),)), 3.0)
+    assert step.state.target_deg == 30.0
+    t = 3.0
+    while t < 6.0:  # on the course, nothing in view, the foot 5 m ahead on it
+        t = round(t + 0.05, 2)
+        step = fly(step.state, Decision(t, FORWARD), t, yaw_deg=0.0)
+    assert step.state.course_progress_m < step.state.contacts_m[0][0]
+    assert step.yaw_rate_deg_s == POLICY.max_yaw_rate_deg_s  # toward 30°, not held at 0°
+    off = fly(step.state, Decision(6.05, FORWARD), 6.05, yaw_deg=0.0,
+              policy=replace(POLICY, resume_clearance_m=0.0))
+    assert off.yaw_rate_deg_s == 0.0

@@ -28,7 +28,8 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``), unless the
   path back (predicted by ``policy.resume_path_clearance_m``) would pass within
   ``policy.resume_clearance_m`` of a floor contact measured earlier
-  (:func:`remembered_contacts`): then the pass-off heading is held. A frame whose scene
+  (:func:`remembered_contacts`): then the pass-off heading is flown, held off the course
+  or, back on it with such a foot ahead, turned to again. A frame whose scene
   is not understood (``hold``) stops the vehicle but not this turn, which rests on
   earlier frames and the reported heading: stopped and still, the view would never change;
 - forward speed (:func:`forward_speed_setpoint`): ``offboard.forward_speed_m_s`` while
