@@ -98,6 +98,10 @@ class PolicyConfig:
     resume_clearance_m: float = field(default=0.5, metadata=_range(0.0, 5.0))
     """the course does not resume while the predicted resume passes nearer than this to a
     floor contact measured earlier (policy.resume_path_clearance_m); 0: the rule off"""
+    hidden_depth_m: float = field(default=1.0, metadata=_range(0.0, 10.0))
+    """... nor to the floor an obstacle is taken to cover behind its feet, this far along
+    each face that leads away from the camera (vision/ranging.py ``hidden_extent``): one
+    view does not show how deep a piece is; 0: the feet alone"""
     # Once the pass-off is taken on one side of the course, frames asking for the other
     # side are not acted on until the vehicle is back on the course and past the last
     # obstacle foot measured (policy.keeps_side).

@@ -105,7 +105,7 @@ def _vision_loop(config: Config, frames: LatestFrame, controller: OffboardContro
                           range_m=est.range_m,
                           path_m=est.path_m(config.policy.path_half_width_m),
                           confirmed=est.eta_tracked_deg is not None,
-                          contacts_m=est.contacts_ahead_right_m)
+                          contacts_m=est.footprint_ahead_right_m(config.policy.hidden_depth_m))
         now = time.monotonic()
         health.decisions += 1
         health.last_decision_s = now

@@ -538,17 +538,19 @@ def _observe(policy: str, scene: Scene, cam: Camera, pipeline, image: np.ndarray
                         str | None, tuple[tuple[float, float], ...]]:
     """η and the tracked η (or None), whether the scene was understood, the range and
     path distance (:class:`~companion.control.supervisor.Decision`), the rule that read
-    the frame's obstacle (``Obstacle.rule``; None without one) and the floor contacts
-    (``Estimate.contacts_ahead_right_m``), as the policy sees the
-    frame (``image``: the rendered frame, for ``paper``, measured at the camera height the
-    autopilot reports, as the service does). The oracle knows no range, and turns only for
-    a rotated obstacle in view (not for the square one of ``--manhattan``); its true η is
-    its own track, so it steers the same whether the policy steers by the track or not."""
+    the frame's obstacle (``Obstacle.rule``; None without one) and the floor contacts with
+    the floor taken to be covered behind them (``Estimate.footprint_ahead_right_m``), as
+    the policy sees the frame (``image``: the rendered frame, for ``paper``, measured at
+    the camera height the autopilot reports, as the service does). The oracle knows no
+    range, and turns only for a rotated obstacle in view (not for the square one of
+    ``--manhattan``); its true η is its own track, so it steers the same whether the policy
+    steers by the track or not."""
     if policy == "paper":
         est = pipeline(image, camera_height_m=cam.height_m)
         return (est.eta_deg, est.eta_tracked_deg, est.scene_understood, est.range_m,
                 est.path_m(pipeline.config.policy.path_half_width_m),
-                est.obstacles[0].rule if est.obstacles else None, est.contacts_ahead_right_m)
+                est.obstacles[0].rule if est.obstacles else None,
+                est.footprint_ahead_right_m(pipeline.config.policy.hidden_depth_m))
     if policy == "oracle":
         truth = scene_truth(scene, cam).obstacles[0]
         eta = truth.eta_deg if truth.corners_px and truth.non_manhattan else None

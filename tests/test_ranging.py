@@ -14,6 +14,7 @@ from companion.vision.ranging import (
     floor_contacts,
     floor_point,
     floor_points,
+    hidden_extent,
     obstacle_contact,
     path_distance,
 )
@@ -101,6 +102,77 @@ def test_the_lower_corner_of_a_vertical_edge_is_the_floor_contact():
 
 
 @pytest.mark.parametrize("pitch, roll", [(0.0, 0.0), (4.0, 0.0), (-3.0, 3.0)])
+def _inside(point, polygon, tol_m):
+    """Whether ``point`` lies in the convex ``polygon`` [(x, y), ...] or within ``tol_m``
+    of it."""
+    pts = np.asarray(polygon, float)
+    p = np.asarray(point, float)
+    inside, best = True, math.inf
+    for a, b in zip(pts, np.roll(pts, -1, axis=0), strict=True):
+        ab, ap = b - a, p - a
+        t = float(np.clip(ap @ ab / (ab @ ab), 0.0, 1.0))
+        best = min(best, float(np.linalg.norm(ap - t * ab)))
+        inside &= (ab[0] * ap[1] - ab[1] * ap[0]) * _orientation(pts) >= 0.0
+    return inside or best <= tol_m
+
+
+def _orientation(pts):
+    return math.copysign(1.0, sum(a[0] * b[1] - a[1] * b[0]
+                                  for a, b in zip(pts, np.roll(pts, -1, axis=0), strict=True)))
+
+
+def _seen_box(seen, pitch=3.0, roll=-2.0, h=1.0, top_m=0.7):
+    """A box 1.2 × 0.8 m turned 30° off the line of sight, its near corner 2.5 m ahead:
+    its floor corners (ahead, right; near, left, back, right), the pixels of the corners
+    ``seen`` (indices into those) and of their tops, its two OVPs and V3."""
+    rot, v3 = _tilted_camera(pitch, roll)
+    a = math.radians(30.0)
+    u1 = np.array([math.cos(a), math.sin(a)])  # the near corner to the right one
+    u2 = np.array([math.sin(a), -math.cos(a)])  # ... to the left one
+    near = np.array([2.5, 0.1])
+    floor = [near, near + 0.8 * u2, near + 0.8 * u2 + 1.2 * u1, near + 1.2 * u1]
+    pixels = []
+    for k in seen:
+        x, y = floor[k]
+        pixels += [_pixel(rot, np.array([y, h, x])), _pixel(rot, np.array([y, h - top_m, x]))]
+    ovps = []
+    for u in (u1, u2):
+        d = rot @ np.array([u[1], 0.0, u[0]])
+        ovps.append([F * d[0] + CENTRE[0] * d[2], F * d[1] + CENTRE[1] * d[2], d[2]])
+    return [tuple(f) for f in floor], np.array(pixels), np.array(ovps), v3
+
+
+def test_the_floor_behind_a_box_s_feet_is_taken_along_the_faces_leading_away():
+    floor, pixels, ovps, v3 = _seen_box(seen=(0, 1, 3))  # the near corner and both sides
+    h = 1.0
+    got = hidden_extent(pixels, ovps, v3, F, CENTRE, h, depth_m=0.5)
+    assert hidden_extent(pixels, ovps, v3, F, CENTRE, h, depth_m=0.0) == []
+    # Every point is on the box's floor: the faces seen run from the near foot to the
+    # side feet and no farther; behind each side foot, the hidden side 0.5 m deep.
+    assert got and all(_inside(p, floor, 1e-6) for p in got)
+    near, left, back, right = (np.array(f) for f in floor)
+    for start, toward in ((left, back), (right, back), (near, left), (near, right)):
+        reach = min(0.5, float(np.linalg.norm(toward - start))) if start is not near else \
+            float(np.linalg.norm(toward - start))
+        end = start + (toward - start) / np.linalg.norm(toward - start) * reach
+        assert min(np.linalg.norm(np.array(p) - end) for p in got) < 0.1
+
+
+def test_a_face_seen_alone_is_not_taken_past_its_far_foot():
+    # One face seen (the near corner and the left one, no corner of the right face): its
+    # far foot ends it; behind both feet lies the side not seen.
+    floor, pixels, ovps, v3 = _seen_box(seen=(0, 1), pitch=0.0, roll=0.0)
+    got = hidden_extent(pixels, ovps, v3, F, CENTRE, 1.0, depth_m=0.75)
+    assert got and all(_inside(p, floor, 1e-6) for p in got)
+    near, left = np.array(floor[0]), np.array(floor[1])
+    assert max(np.linalg.norm(np.array(p) - near) for p in got) > 0.7  # 0.75 m behind
+    assert max(np.linalg.norm(np.array(p) - left) for p in got) > 0.7
+    # Without the rule that the far foot ends its face, the face would be taken on
+    # beyond it (the direction leading away from the camera there): outside the box.
+    assert max(float((np.array(p) - near) @ (left - near)) / 0.8 for p in got) <= 0.8 + 1e-6
+
+
+@pytest.mark.parametrize("pitch, roll", [(0.0, 0.0), (4.0, 0.0), (-3.0, 3.0)])
 def test_the_pipeline_measures_the_range_of_a_rendered_box(pitch, roll):
     scene, cam = sample_scene()
     cam = replace(cam, pitch_deg=pitch, roll_deg=roll)
@@ -120,6 +192,15 @@ def test_the_pipeline_measures_the_range_of_a_rendered_box(pitch, roll):
     for (ahead, right), c in zip(est.contacts_ahead_right_m, flat, strict=True):
         assert ahead > 0.0  # pitch turns the image about its x axis: the side is the same
         assert roll != 0.0 or (right > 0.0) == (c.pixel[0] > image.shape[1] / 2)
+    # ... and the floor behind them, on the box's footprint to the range's accuracy.
+    assert est.footprint_ahead_right_m(0.0) == est.contacts_ahead_right_m
+    more = est.footprint_ahead_right_m(0.5)
+    assert more[:len(flat)] == est.contacts_ahead_right_m and len(more) > len(flat)
+    yaw = math.radians(cam.yaw_deg)
+    box = [((x - cam.x) * math.cos(yaw) + (y - cam.y) * math.sin(yaw),
+            -(x - cam.x) * math.sin(yaw) + (y - cam.y) * math.cos(yaw))
+           for x, y, *_ in scene.boxes[0].footprint()]
+    assert all(_inside(p, box, 0.05 * math.hypot(*p)) for p in more)
 
 
 def test_no_height_no_range():

@@ -502,6 +502,22 @@ def test_floor_contacts_are_remembered_in_the_course_frame_and_forgotten_once_be
                                2.0, POLICY)[0] == ((0.5, 0.0), (3.0, 1.0))
 
 
+def test_a_foot_measured_again_replaces_its_earlier_measurement():
+    from companion.control.supervisor import CONTACT_MERGE_M, remembered_contacts
+
+    # A foot seen 3 m ahead, then from 0.5 m nearer as 2.45 m ahead (5 cm off): one point,
+    # the newer; a point of the floor behind it, 0.25 m on, stays a point of its own.
+    first = Decision(1.0, FORWARD, heading_deg=0.0, contacts_m=((3.0, 0.0), (3.25, 0.0)))
+    contacts, since = remembered_contacts(SupervisorState("active", True), first, True, 0.0,
+                                          0.0, 0.0, POLICY)
+    assert contacts == ((3.0, 0.0), (3.25, 0.0))
+    again = Decision(1.2, FORWARD, heading_deg=0.0, contacts_m=((2.45, 0.0),))
+    state = SupervisorState("active", True, contacts_m=contacts, contacts_t_s=since)
+    contacts, _ = remembered_contacts(state, again, True, 0.0, 0.5, 0.0, POLICY)
+    assert contacts == ((3.25, 0.0), (2.95, 0.0))
+    assert 0.05 < CONTACT_MERGE_M < 0.25
+
+
 def resume_past(contacts, policy=POLICY):
     """Cruise along 0°, see a face 40° right with ``contacts`` (ahead, right of the camera,
     m) at 3 s, fly the pass-off heading (30°) with nothing more in view, and return the

@@ -129,7 +129,7 @@ class OffboardController:
         """Hand over the newest decision (``t_s``: when its frame was taken, on ``clock``).
         It carries the heading the autopilot reports now, the frame's a few ms ago, the
         frame's OBSTACLE_DISTANCE sectors, if it measured any, its ranges, whether the
-        tracker confirmed its obstacle and its floor contacts
+        tracker confirmed its obstacle and its floor contacts with the floor behind them
         (:class:`~companion.control.supervisor.Decision`)."""
         pose = self.pose
         decision = sv.Decision(self.clock() if t_s is None else t_s, command, eta_deg,

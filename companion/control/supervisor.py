@@ -27,9 +27,10 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   and back to the course once no obstacle has been seen for ``policy.resume_after_s``
   (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``), unless the
   path back (predicted by ``policy.resume_path_clearance_m``) would pass within
-  ``policy.resume_clearance_m`` of a floor contact measured earlier
-  (:func:`remembered_contacts`): then the pass-off heading is flown, held off the course
-  or, back on it with such a foot ahead, turned to again. A frame whose scene
+  ``policy.resume_clearance_m`` of a floor contact measured earlier, or of the floor
+  taken to be covered behind one (``policy.hidden_depth_m``, :func:`remembered_contacts`):
+  then the pass-off heading is flown, held off the course or, back on it with such a foot
+  ahead, turned to again. A frame whose scene
   is not understood (``hold``) stops the vehicle but not this turn, which rests on
   earlier frames and the reported heading: stopped and still, the view would never change;
 - forward speed (:func:`forward_speed_setpoint`): ``offboard.forward_speed_m_s`` while
@@ -51,6 +52,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from typing import Literal
+
+import numpy as np
 
 from companion.config import OffboardConfig, PolicyConfig
 from companion.control.policy import (
@@ -101,8 +104,9 @@ class Decision:
     path_m: float | None = None  # to the nearest obstacle in the path; inf: none; None: not
     #                              measured (ranging.path_distance)
     confirmed: bool = True  # the tracker confirms the obstacle (policy.turns_for)
-    contacts_m: tuple[tuple[float, float], ...] = ()  # the obstacles' floor contacts, m
-    #                                    ahead and right of the camera (ranging.FloorContact)
+    contacts_m: tuple[tuple[float, float], ...] = ()  # the obstacles' floor contacts, and
+    #   the floor taken to be covered behind them (policy.hidden_depth_m), m ahead and
+    #   right of the camera (Estimate.footprint_ahead_right_m)
 
 
 @dataclass(frozen=True)
@@ -366,9 +370,14 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
     return keep
 
 
-CONTACT_MEMORY = 256
-"""At most this many floor contacts are remembered, the newest: a foot seen on every frame
-of a few seconds' approach is a few dozen."""
+CONTACT_MEMORY = 1024
+"""At most this many floor contacts are remembered, the newest: with
+:data:`CONTACT_MERGE_M` a piece's feet and the floor behind them
+(``policy.hidden_depth_m``) are a few dozen points each."""
+
+CONTACT_MERGE_M = 0.1
+"""A contact remembered this near a new one is replaced by it: a foot seen on every frame
+is one point, measured from ever nearer, however fast the camera."""
 
 
 def remembered_contacts(prev: SupervisorState, decision: Decision | None, fresh: bool,
@@ -381,8 +390,9 @@ def remembered_contacts(prev: SupervisorState, decision: Decision | None, fresh:
     The vehicle is at (``along_m``, ``across_m``), dead-reckoned. A new fresh decision
     taken at a known heading adds its contacts (``Decision.contacts_m``), those within
     ``act_within_m`` (nearer ones are measured better: the range error grows with its
-    square); a contact farther behind the vehicle than ``resume_clearance_m`` is
-    forgotten, as no path ahead can pass nearer to it; at most :data:`CONTACT_MEMORY`.
+    square), each replacing those remembered within :data:`CONTACT_MERGE_M` of it; a
+    contact farther behind the vehicle than ``resume_clearance_m`` is forgotten, as no
+    path ahead can pass nearer to it; at most :data:`CONTACT_MEMORY`.
     """
     kept = [c for c in prev.contacts_m if c[0] >= along_m - policy.resume_clearance_m]
     since = prev.contacts_t_s
@@ -390,11 +400,15 @@ def remembered_contacts(prev: SupervisorState, decision: Decision | None, fresh:
             and decision.heading_deg is not None):
         since = decision.t_s
         b = math.radians(wrap_deg(decision.heading_deg - course_deg))
-        for ahead, right in decision.contacts_m:
-            if policy.act_within_m > 0.0 and math.hypot(ahead, right) > policy.act_within_m:
-                continue
-            kept.append((along_m + ahead * math.cos(b) - right * math.sin(b),
-                         across_m + ahead * math.sin(b) + right * math.cos(b)))
+        new = [(along_m + ahead * math.cos(b) - right * math.sin(b),
+                across_m + ahead * math.sin(b) + right * math.cos(b))
+               for ahead, right in decision.contacts_m
+               if policy.act_within_m <= 0.0 or math.hypot(ahead, right) <= policy.act_within_m]
+        if new and kept:
+            gaps = np.asarray(kept)[:, None, :] - np.asarray(new)[None, :, :]
+            near = ((gaps ** 2).sum(axis=2) < CONTACT_MERGE_M ** 2).any(axis=1)
+            kept = [c for c, n in zip(kept, near.tolist(), strict=True) if not n]
+        kept.extend(new)
     return tuple(kept[-CONTACT_MEMORY:]), since
 
 

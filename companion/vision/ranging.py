@@ -22,13 +22,17 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FloorContact", "floor_point", "floor_points", "floor_contacts", "obstacle_contact",
-           "down_direction", "path_distance"]
+           "down_direction", "path_distance", "hidden_extent"]
 
 VERTICAL_EDGE_TOL_DEG = 2.0
 """two corners are on one vertical edge when their line points at V3 within this"""
 
 MIN_DEPRESSION_DEG = 1.0
 """a ray less than this below the horizon meets the floor too far away to trust"""
+
+FACE_TOL_DEG = 3.0
+"""a corner lies on a face through a foot when its line to the face's OVP passes through
+the foot, or the top of the foot's vertical edge, within this"""
 
 
 @dataclass(frozen=True)
@@ -63,6 +67,16 @@ def down_direction(v3: np.ndarray, focal_px: float, centre: np.ndarray) -> np.nd
     return np.array([dx / n, dy / n, dz / n])
 
 
+def _floor_axes(down) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The camera's forward and right directions levelled onto the floor (unit, camera
+    coordinates): forward without its down part; right = down × forward."""
+    dx, dy, dz = (float(t) for t in down)
+    fx, fy, fz = -dz * dx, -dz * dy, 1.0 - dz * dz
+    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+    fx, fy, fz = fx / fn, fy / fn, fz / fn
+    return (fx, fy, fz), (dy * fz - dz * fy, dz * fx - dx * fz, dx * fy - dy * fx)
+
+
 def floor_point(pixel, down: np.ndarray, focal_px: float, centre: np.ndarray,
                 camera_height_m: float) -> FloorContact | None:
     """The floor point seen at ``pixel`` (x, y), None above or too near the horizon.
@@ -80,12 +94,7 @@ def floor_points(pixels: np.ndarray, down: np.ndarray, focal_px: float, centre: 
     handful of corners, for which numpy's per-call cost is most of the time."""
     dx, dy, dz = (float(t) for t in down)
     cx, cy = float(centre[0]), float(centre[1])
-    # The camera's forward and right directions levelled onto the floor: forward without
-    # its down part; right = down × forward.
-    fx, fy, fz = -dz * dx, -dz * dy, 1.0 - dz * dz
-    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
-    fx, fy, fz = fx / fn, fy / fn, fz / fn
-    rx, ry, rz = dy * fz - dz * fy, dz * fx - dx * fz, dx * fy - dy * fx
+    (fx, fy, fz), (rx, ry, rz) = _floor_axes(down)
     min_s = math.sin(math.radians(MIN_DEPRESSION_DEG))
     out: list[FloorContact | None] = []
     for x, y in np.asarray(pixels, dtype=float).reshape(-1, 2).tolist():
@@ -105,18 +114,10 @@ def floor_points(pixels: np.ndarray, down: np.ndarray, focal_px: float, centre: 
     return out
 
 
-def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
-                   centre: np.ndarray, camera_height_m: float) -> list[FloorContact]:
-    """Every floor contact of an obstacle whose corner projections are ``corners_px``
-    (K×2): the lower corner of each pair of its corners on one line through V3, seen on
-    the floor, sorted by bearing. Empty when no two corners share a vertical edge.
-
-    Scalar arithmetic over the K² pairs: K is a handful of corners, and the service
-    ranges every obstacle of every frame."""
-    pts = np.asarray(corners_px, dtype=float).reshape(-1, 2).tolist()
-    if len(pts) < 2:
-        return []
-    down = down_direction(v3, focal_px, centre)
+def _feet(pts: list, v3: np.ndarray, down: np.ndarray, focal_px: float,
+          centre: np.ndarray) -> list[tuple[int, int]]:
+    """Each foot among the corners ``pts`` [(x, y), ...] with the top of its edge: (i, j)
+    where ``pts[i]`` lies farther down than ``pts[j]`` on one line through V3."""
     dx, dy, dz = (float(t) for t in down)
     vx, vy, vw = (float(t) for t in np.asarray(v3, dtype=float).reshape(3))
     cx, cy = float(centre[0]), float(centre[1])
@@ -129,7 +130,7 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
         to_v3.append((tx, ty, math.hypot(tx, ty)))
         ux, uy = (x - cx) / focal_px, (y - cy) / focal_px
         depression.append((ux * dx + uy * dy + dz) / math.sqrt(1.0 + ux * ux + uy * uy))
-    lower = []
+    feet = []
     for i, (xi, yi) in enumerate(pts):
         # i lies farther down than a corner j on its vertical line: the foot of their edge.
         for j, (xj, yj) in enumerate(pts):
@@ -138,11 +139,110 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
             tx, ty, m = to_v3[j]
             if (n >= 1.0 and m >= 1e-12 and abs(ex * ty - ey * tx) <= tol * n * m
                     and depression[i] > depression[j]):
-                lower.append(pts[i])
+                feet.append((i, j))
                 break
+    return feet
+
+
+def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
+                   centre: np.ndarray, camera_height_m: float) -> list[FloorContact]:
+    """Every floor contact of an obstacle whose corner projections are ``corners_px``
+    (K×2): the lower corner of each pair of its corners on one line through V3, seen on
+    the floor, sorted by bearing. Empty when no two corners share a vertical edge.
+
+    Scalar arithmetic over the K² pairs: K is a handful of corners, and the service
+    ranges every obstacle of every frame."""
+    pts = np.asarray(corners_px, dtype=float).reshape(-1, 2).tolist()
+    if len(pts) < 2:
+        return []
+    down = down_direction(v3, focal_px, centre)
+    lower = [pts[i] for i, _ in _feet(pts, v3, down, focal_px, centre)]
     out = floor_points(np.array(lower).reshape(-1, 2), down, focal_px, centre,
                        camera_height_m)
     return sorted((c for c in out if c is not None), key=lambda c: c.bearing_deg)
+
+
+def _cross(a, b) -> tuple[float, float, float]:
+    """a × b of two 3-sequences: the line through two homogeneous points, or the point
+    where two lines meet."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _on_face(c, p, ovp) -> bool:
+    """Whether the line from corner ``c`` (x, y) toward the homogeneous ``ovp`` passes
+    through ``p`` (x, y) within :data:`FACE_TOL_DEG`."""
+    ax, ay = p[0] - c[0], p[1] - c[1]
+    bx, by = ovp[0] - ovp[2] * c[0], ovp[1] - ovp[2] * c[1]
+    na, nb = math.hypot(ax, ay), math.hypot(bx, by)
+    return (na >= 1.0 and nb >= 1e-12
+            and abs(ax * by - ay * bx) <= math.sin(math.radians(FACE_TOL_DEG)) * na * nb)
+
+
+def hidden_extent(corners_px: np.ndarray, ovps: np.ndarray, v3: np.ndarray, focal_px: float,
+                  centre: np.ndarray, camera_height_m: float, depth_m: float,
+                  step_m: float = 0.25) -> list[tuple[float, float]]:
+    """Floor points an obstacle is taken to cover behind its feet, each (m ahead of the
+    camera, m to its right): what one view cannot measure.
+
+    An obstacle's faces run from each foot along its two horizontal axes (the OVPs
+    ``ovps[0]``, ``ovps[1]``, homogeneous pixels); a face turned away from the camera is
+    hidden, and so is how far the obstacle reaches behind what is seen. From each foot
+    (:func:`floor_contacts`), along each axis in the direction that leads away from the
+    camera, the floor is sampled at most ``step_m`` apart for ``depth_m``, or as far as the
+    last corner seen on that face (the foot of its vertical line, through V3) if that is
+    farther; an axis along which a corner of the obstacle is seen on the near side of the
+    foot is skipped, since that face is seen to end at the foot. ``corners_px`` K×2,
+    ``v3`` homogeneous, ``focal_px``, ``centre`` the camera, ``camera_height_m`` above the
+    floor. Not in the paper: the resume rule (:mod:`companion.control.supervisor`) keeps
+    clear of these as of the feet themselves. Scalar arithmetic, as
+    :func:`floor_contacts`: it runs for every obstacle of every frame in flight.
+    """
+    pts = np.asarray(corners_px, dtype=float).reshape(-1, 2).tolist()
+    if len(pts) < 2 or depth_m <= 0.0 or step_m <= 0.0:
+        return []
+    down = down_direction(v3, focal_px, centre)
+    (fx, fy, fz), (rx, ry, rz) = _floor_axes(down)
+    cx, cy = float(centre[0]), float(centre[1])
+    v3h = [float(t) for t in np.asarray(v3, dtype=float).reshape(3)]
+    axes = [[float(t) for t in o] for o in np.asarray(ovps, dtype=float)[:2]]
+    feet = _feet(pts, v3, down, focal_px, centre)
+    at = floor_points(np.array([pts[i] for i, _ in feet]).reshape(-1, 2), down, focal_px,
+                      centre, camera_height_m)
+    # Each corner's vertical line, through V3.
+    verticals = [_cross((x, y, 1.0), v3h) for x, y in pts]
+    out: list[tuple[float, float]] = []
+    for (i, j), foot in zip(feet, at, strict=True):
+        if foot is None:
+            continue
+        fa, fr = foot.ahead_right_m
+        for ovp in axes:
+            # The axis on the floor (ahead, right): the OVP's direction without its down part.
+            ox, oy, oz = ovp[0] - ovp[2] * cx, ovp[1] - ovp[2] * cy, ovp[2] * focal_px
+            a, b = ox * fx + oy * fy + oz * fz, ox * rx + oy * ry + oz * rz
+            n = math.hypot(a, b)
+            if n < 1e-12:
+                continue
+            a, b = a / n, b / n
+            if a * fa + b * fr < 0.0:  # the direction leading away from the camera
+                a, b = -a, -b
+            # The corners seen on this face: where their vertical edges meet its foot.
+            face = _cross((pts[i][0], pts[i][1], 1.0), ovp)
+            meets = []
+            for k, c in enumerate(pts):
+                if k in (i, j) or not (_on_face(c, pts[i], ovp) or _on_face(c, pts[j], ovp)):
+                    continue
+                q = _cross(face, verticals[k])
+                if abs(q[2]) >= 1e-12:
+                    meets.append((q[0] / q[2], q[1] / q[2]))
+            along = [(g.ahead_right_m[0] - fa) * a + (g.ahead_right_m[1] - fr) * b
+                     for g in floor_points(np.array(meets).reshape(-1, 2), down, focal_px,
+                                           centre, camera_height_m) if g is not None]
+            if any(t < -step_m for t in along):
+                continue  # a corner on the near side: the face seen ends at this foot
+            reach = max([depth_m, *along])
+            n = max(1, math.ceil(reach / step_m - 1e-9))
+            out += [(fa + a * reach * k / n, fr + b * reach * k / n) for k in range(1, n + 1)]
+    return out
 
 
 def obstacle_contact(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
