@@ -114,31 +114,34 @@ def floor_points(pixels: np.ndarray, down: np.ndarray, focal_px: float, centre: 
     return out
 
 
+def _passes_through(c, p, vp, sin_tol: float) -> bool:
+    """Whether the line from corner ``c`` (x, y) toward the homogeneous point ``vp`` (which
+    may be at infinity) passes through ``p`` (x, y), at least a pixel away, within the
+    angle whose sine is ``sin_tol``."""
+    ax, ay = p[0] - c[0], p[1] - c[1]
+    bx, by = vp[0] - vp[2] * c[0], vp[1] - vp[2] * c[1]
+    na, nb = math.hypot(ax, ay), math.hypot(bx, by)
+    return na >= 1.0 and nb >= 1e-12 and abs(ax * by - ay * bx) <= sin_tol * na * nb
+
+
 def _feet(pts: list, v3: np.ndarray, down: np.ndarray, focal_px: float,
           centre: np.ndarray) -> list[tuple[int, int]]:
     """Each foot among the corners ``pts`` [(x, y), ...] with the top of its edge: (i, j)
     where ``pts[i]`` lies farther down than ``pts[j]`` on one line through V3."""
     dx, dy, dz = (float(t) for t in down)
-    vx, vy, vw = (float(t) for t in np.asarray(v3, dtype=float).reshape(3))
+    v3h = [float(t) for t in np.asarray(v3, dtype=float).reshape(3)]
     cx, cy = float(centre[0]), float(centre[1])
     tol = math.sin(math.radians(VERTICAL_EDGE_TOL_DEG))
-    # to_v3 of corner j points from it toward V3 (which may be at infinity), with its
-    # length; depression: the sine of the angle its ray (u, 1) makes below the horizon.
-    to_v3, depression = [], []
+    # depression: the sine of the angle a corner's ray (u, 1) makes below the horizon.
+    depression = []
     for x, y in pts:
-        tx, ty = vx - vw * x, vy - vw * y
-        to_v3.append((tx, ty, math.hypot(tx, ty)))
         ux, uy = (x - cx) / focal_px, (y - cy) / focal_px
         depression.append((ux * dx + uy * dy + dz) / math.sqrt(1.0 + ux * ux + uy * uy))
     feet = []
-    for i, (xi, yi) in enumerate(pts):
+    for i, p in enumerate(pts):
         # i lies farther down than a corner j on its vertical line: the foot of their edge.
-        for j, (xj, yj) in enumerate(pts):
-            ex, ey = xi - xj, yi - yj
-            n = math.hypot(ex, ey)
-            tx, ty, m = to_v3[j]
-            if (n >= 1.0 and m >= 1e-12 and abs(ex * ty - ey * tx) <= tol * n * m
-                    and depression[i] > depression[j]):
+        for j, c in enumerate(pts):
+            if depression[i] > depression[j] and _passes_through(c, p, v3h, tol):
                 feet.append((i, j))
                 break
     return feet
@@ -166,16 +169,6 @@ def _cross(a, b) -> tuple[float, float, float]:
     """a × b of two 3-sequences: the line through two homogeneous points, or the point
     where two lines meet."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _on_face(c, p, ovp) -> bool:
-    """Whether the line from corner ``c`` (x, y) toward the homogeneous ``ovp`` passes
-    through ``p`` (x, y) within :data:`FACE_TOL_DEG`."""
-    ax, ay = p[0] - c[0], p[1] - c[1]
-    bx, by = ovp[0] - ovp[2] * c[0], ovp[1] - ovp[2] * c[1]
-    na, nb = math.hypot(ax, ay), math.hypot(bx, by)
-    return (na >= 1.0 and nb >= 1e-12
-            and abs(ax * by - ay * bx) <= math.sin(math.radians(FACE_TOL_DEG)) * na * nb)
 
 
 def hidden_extent(corners_px: np.ndarray, ovps: np.ndarray, v3: np.ndarray, focal_px: float,
@@ -208,6 +201,7 @@ def hidden_extent(corners_px: np.ndarray, ovps: np.ndarray, v3: np.ndarray, foca
     feet = _feet(pts, v3, down, focal_px, centre)
     at = floor_points(np.array([pts[i] for i, _ in feet]).reshape(-1, 2), down, focal_px,
                       centre, camera_height_m)
+    on_face = math.sin(math.radians(FACE_TOL_DEG))
     # Each corner's vertical line, through V3.
     verticals = [_cross((x, y, 1.0), v3h) for x, y in pts]
     out: list[tuple[float, float]] = []
@@ -229,7 +223,8 @@ def hidden_extent(corners_px: np.ndarray, ovps: np.ndarray, v3: np.ndarray, foca
             face = _cross((pts[i][0], pts[i][1], 1.0), ovp)
             meets = []
             for k, c in enumerate(pts):
-                if k in (i, j) or not (_on_face(c, pts[i], ovp) or _on_face(c, pts[j], ovp)):
+                if k in (i, j) or not (_passes_through(c, pts[i], ovp, on_face)
+                                       or _passes_through(c, pts[j], ovp, on_face)):
                     continue
                 q = _cross(face, verticals[k])
                 if abs(q[2]) >= 1e-12:
@@ -240,8 +235,9 @@ def hidden_extent(corners_px: np.ndarray, ovps: np.ndarray, v3: np.ndarray, foca
             if any(t < -step_m for t in along):
                 continue  # a corner on the near side: the face seen ends at this foot
             reach = max([depth_m, *along])
-            n = max(1, math.ceil(reach / step_m - 1e-9))
-            out += [(fa + a * reach * k / n, fr + b * reach * k / n) for k in range(1, n + 1)]
+            steps = max(1, math.ceil(reach / step_m - 1e-9))
+            out += [(fa + a * reach * k / steps, fr + b * reach * k / steps)
+                    for k in range(1, steps + 1)]
     return out
 
 
