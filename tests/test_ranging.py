@@ -98,6 +98,7 @@ def test_the_lower_corner_of_a_vertical_edge_is_the_floor_contact():
     pts = np.array([[300.0, 200.0], [300.0, 319.5]])  # top, bottom of one edge
     c = obstacle_contact(pts, STRAIGHT_DOWN, F, CENTRE, 1.2)
     assert c.pixel == (300.0, 319.5)
+    assert c.top_pixel == (300.0, 200.0)  # the edge it is the foot of
     assert c.range_m == pytest.approx(1.2 * F / 80.0 * math.hypot(1, 19.5 / F), rel=1e-6)
 
 
@@ -145,8 +146,10 @@ def _seen_box(seen, pitch=3.0, roll=-2.0, h=1.0, top_m=0.7):
 def test_the_floor_behind_a_box_s_feet_is_taken_along_the_faces_leading_away():
     floor, pixels, ovps, v3 = _seen_box(seen=(0, 1, 3))  # the near corner and both sides
     h = 1.0
-    got = hidden_extent(pixels, ovps, v3, F, CENTRE, h, depth_m=0.5)
-    assert hidden_extent(pixels, ovps, v3, F, CENTRE, h, depth_m=0.0) == []
+    feet = floor_contacts(pixels, v3, F, CENTRE, h)
+    got = hidden_extent(pixels, feet, ovps, v3, F, CENTRE, h, depth_m=0.5)
+    assert hidden_extent(pixels, feet, ovps, v3, F, CENTRE, h, depth_m=0.0) == []
+    assert hidden_extent(pixels, (), ovps, v3, F, CENTRE, h, depth_m=0.5) == []
     # Every point is on the box's floor: the faces seen run from the near foot to the
     # side feet and no farther; behind each side foot, the hidden side 0.5 m deep.
     assert got and all(_inside(p, floor, 1e-6) for p in got)
@@ -162,7 +165,8 @@ def test_a_face_seen_alone_is_not_taken_past_its_far_foot():
     # One face seen (the near corner and the left one, no corner of the right face): its
     # far foot ends it; behind both feet lies the side not seen.
     floor, pixels, ovps, v3 = _seen_box(seen=(0, 1), pitch=0.0, roll=0.0)
-    got = hidden_extent(pixels, ovps, v3, F, CENTRE, 1.0, depth_m=0.75)
+    got = hidden_extent(pixels, floor_contacts(pixels, v3, F, CENTRE, 1.0), ovps, v3, F,
+                        CENTRE, 1.0, depth_m=0.75)
     assert got and all(_inside(p, floor, 1e-6) for p in got)
     near, left = np.array(floor[0]), np.array(floor[1])
     assert max(np.linalg.norm(np.array(p) - near) for p in got) > 0.7  # 0.75 m behind

@@ -275,8 +275,8 @@ class Estimate:
         if hidden_depth_m <= 0.0 or not self.camera_height_m or not any(self.obstacle_contacts):
             return self.contacts_ahead_right_m
         centre = principal_point(self.width, self.height)
-        behind = (p for o in self.obstacles
-                  for p in hidden_extent(o.corners_px, o.ovps, self.layout.vps[V3],
+        behind = (p for o, contacts in zip(self.obstacles, self.obstacle_contacts, strict=True)
+                  for p in hidden_extent(o.corners_px, contacts, o.ovps, self.layout.vps[V3],
                                          self.layout.focal_px, centre, self.camera_height_m,
                                          hidden_depth_m))
         return self.contacts_ahead_right_m + tuple(behind)

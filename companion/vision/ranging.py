@@ -39,11 +39,13 @@ the foot, or the top of the foot's vertical edge, within this"""
 class FloorContact:
     """Where something meets the floor: ``range_m`` horizontal distance from the camera,
     ``bearing_deg`` right of the camera's forward direction (projected on the floor),
-    ``pixel`` the image point (x, y)."""
+    ``pixel`` the image point (x, y); ``top_pixel`` the upper corner of the vertical edge
+    whose foot it is (:func:`floor_contacts`), None for a floor point alone."""
 
     range_m: float
     bearing_deg: float
     pixel: tuple[float, float]
+    top_pixel: tuple[float, float] | None = None
 
     @property
     def ahead_right_m(self) -> tuple[float, float]:
@@ -151,7 +153,8 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
                    centre: np.ndarray, camera_height_m: float) -> list[FloorContact]:
     """Every floor contact of an obstacle whose corner projections are ``corners_px``
     (K×2): the lower corner of each pair of its corners on one line through V3, seen on
-    the floor, sorted by bearing. Empty when no two corners share a vertical edge.
+    the floor, sorted by bearing, each with the upper corner of its edge (``top_pixel``).
+    Empty when no two corners share a vertical edge.
 
     Scalar arithmetic over the K² pairs: K is a handful of corners, and the service
     ranges every obstacle of every frame."""
@@ -159,10 +162,12 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
     if len(pts) < 2:
         return []
     down = down_direction(v3, focal_px, centre)
-    lower = [pts[i] for i, _ in _feet(pts, v3, down, focal_px, centre)]
-    out = floor_points(np.array(lower).reshape(-1, 2), down, focal_px, centre,
-                       camera_height_m)
-    return sorted((c for c in out if c is not None), key=lambda c: c.bearing_deg)
+    feet = _feet(pts, v3, down, focal_px, centre)
+    out = floor_points(np.array([pts[i] for i, _ in feet]).reshape(-1, 2), down, focal_px,
+                       centre, camera_height_m)
+    return sorted((FloorContact(c.range_m, c.bearing_deg, c.pixel, tuple(pts[j]))
+                   for c, (_, j) in zip(out, feet, strict=True) if c is not None),
+                  key=lambda c: c.bearing_deg)
 
 
 def _cross(a, b) -> tuple[float, float, float]:
@@ -171,43 +176,41 @@ def _cross(a, b) -> tuple[float, float, float]:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-def hidden_extent(corners_px: np.ndarray, ovps: np.ndarray, v3: np.ndarray, focal_px: float,
-                  centre: np.ndarray, camera_height_m: float, depth_m: float,
-                  step_m: float = 0.25) -> list[tuple[float, float]]:
+def hidden_extent(corners_px: np.ndarray, contacts: Sequence[FloorContact], ovps: np.ndarray,
+                  v3: np.ndarray, focal_px: float, centre: np.ndarray, camera_height_m: float,
+                  depth_m: float, step_m: float = 0.25) -> list[tuple[float, float]]:
     """Floor points an obstacle is taken to cover behind its feet, each (m ahead of the
     camera, m to its right): what one view cannot measure.
 
     An obstacle's faces run from each foot along its two horizontal axes (the OVPs
     ``ovps[0]``, ``ovps[1]``, homogeneous pixels); a face turned away from the camera is
     hidden, and so is how far the obstacle reaches behind what is seen. From each foot
-    (:func:`floor_contacts`), along each axis in the direction that leads away from the
-    camera, the floor is sampled at most ``step_m`` apart for ``depth_m``, or as far as the
-    last corner seen on that face (the foot of its vertical line, through V3) if that is
-    farther; an axis along which a corner of the obstacle is seen on the near side of the
-    foot is skipped, since that face is seen to end at the foot. ``corners_px`` K×2,
-    ``v3`` homogeneous, ``focal_px``, ``centre`` the camera, ``camera_height_m`` above the
-    floor. Not in the paper: the resume rule (:mod:`companion.control.supervisor`) keeps
-    clear of these as of the feet themselves. Scalar arithmetic, as
-    :func:`floor_contacts`: it runs for every obstacle of every frame in flight.
+    (``contacts``: the obstacle's :func:`floor_contacts`, which name the top of each foot's
+    edge), along each axis in the direction that leads away from the camera, the floor is
+    sampled at most ``step_m`` apart for ``depth_m``, or as far as the last corner seen on
+    that face (the foot of its vertical line, through V3) if that is farther; an axis along
+    which a corner of the obstacle is seen on the near side of the foot is skipped, since
+    that face is seen to end at the foot. ``corners_px`` K×2, ``v3`` homogeneous,
+    ``focal_px``, ``centre`` the camera, ``camera_height_m`` above the floor. Not in the
+    paper: the resume rule (:mod:`companion.control.supervisor`) keeps clear of these as of
+    the feet themselves. Scalar arithmetic, as :func:`floor_contacts`: it runs for every
+    obstacle of every frame in flight.
     """
-    pts = np.asarray(corners_px, dtype=float).reshape(-1, 2).tolist()
-    if len(pts) < 2 or depth_m <= 0.0 or step_m <= 0.0:
+    feet = [c for c in contacts if c.top_pixel is not None]
+    if not feet or depth_m <= 0.0 or step_m <= 0.0:
         return []
+    pts = [tuple(p) for p in np.asarray(corners_px, dtype=float).reshape(-1, 2).tolist()]
     down = down_direction(v3, focal_px, centre)
     (fx, fy, fz), (rx, ry, rz) = _floor_axes(down)
     cx, cy = float(centre[0]), float(centre[1])
     v3h = [float(t) for t in np.asarray(v3, dtype=float).reshape(3)]
     axes = [[float(t) for t in o] for o in np.asarray(ovps, dtype=float)[:2]]
-    feet = _feet(pts, v3, down, focal_px, centre)
-    at = floor_points(np.array([pts[i] for i, _ in feet]).reshape(-1, 2), down, focal_px,
-                      centre, camera_height_m)
     on_face = math.sin(math.radians(FACE_TOL_DEG))
     # Each corner's vertical line, through V3.
     verticals = [_cross((x, y, 1.0), v3h) for x, y in pts]
     out: list[tuple[float, float]] = []
-    for (i, j), foot in zip(feet, at, strict=True):
-        if foot is None:
-            continue
+    for foot in feet:
+        low, top = foot.pixel, foot.top_pixel
         fa, fr = foot.ahead_right_m
         for ovp in axes:
             # The axis on the floor (ahead, right): the OVP's direction without its down part.
@@ -220,13 +223,13 @@ def hidden_extent(corners_px: np.ndarray, ovps: np.ndarray, v3: np.ndarray, foca
             if a * fa + b * fr < 0.0:  # the direction leading away from the camera
                 a, b = -a, -b
             # The corners seen on this face: where their vertical edges meet its foot.
-            face = _cross((pts[i][0], pts[i][1], 1.0), ovp)
+            face = _cross((low[0], low[1], 1.0), ovp)
             meets = []
-            for k, c in enumerate(pts):
-                if k in (i, j) or not (_passes_through(c, pts[i], ovp, on_face)
-                                       or _passes_through(c, pts[j], ovp, on_face)):
+            for c, vertical in zip(pts, verticals, strict=True):
+                if c in (low, top) or not (_passes_through(c, low, ovp, on_face)
+                                           or _passes_through(c, top, ovp, on_face)):
                     continue
-                q = _cross(face, verticals[k])
+                q = _cross(face, vertical)
                 if abs(q[2]) >= 1e-12:
                     meets.append((q[0] / q[2], q[1] / q[2]))
             along = [(g.ahead_right_m[0] - fa) * a + (g.ahead_right_m[1] - fr) * b
