@@ -102,6 +102,10 @@ class PolicyConfig:
     """... nor to the floor an obstacle is taken to cover behind its feet, this far along
     each face that leads away from the camera (vision/ranging.py ``hidden_extent``): one
     view does not show how deep a piece is; 0: the feet alone"""
+    resume_in_view: bool = True
+    """the course resumes while the obstacle is still in view, once its feet are measured
+    and the predicted resume keeps resume_clearance_m from every contact and the floor
+    between and behind them (else only once it left the view)"""
     # Once the pass-off is taken on one side of the course, frames asking for the other
     # side are not acted on until the vehicle is back on the course and past the last
     # obstacle foot measured (policy.keeps_side).

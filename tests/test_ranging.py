@@ -14,6 +14,7 @@ from companion.vision.ranging import (
     floor_contacts,
     floor_point,
     floor_points,
+    foot_line,
     hidden_extent,
     obstacle_contact,
     path_distance,
@@ -143,6 +144,18 @@ def _seen_box(seen, pitch=3.0, roll=-2.0, h=1.0, top_m=0.7):
     return [tuple(f) for f in floor], np.array(pixels), np.array(ovps), v3
 
 
+def test_the_foot_of_a_face_between_two_feet_is_sampled_between_them():
+    # Feet 1.1 m apart across the path, 3 m ahead: neither is in it, the face between is.
+    left, right = at(3.0, -0.6), at(3.0, 0.5)
+    got = foot_line([left, right], step_m=0.25)
+    assert len(got) == 4  # 1.1 m in 5 steps of 0.22 m: the 4 points between
+    assert all(p[0] == pytest.approx(3.0) for p in got)
+    gaps = np.diff([-0.6] + [p[1] for p in got] + [0.5])
+    assert gaps == pytest.approx([0.22] * 5)
+    assert path_distance([[left, right]], 0.3) == pytest.approx(3.0)  # as path_distance
+    assert foot_line([left]) == [] and foot_line([]) == []
+
+
 def test_the_floor_behind_a_box_s_feet_is_taken_along_the_faces_leading_away():
     floor, pixels, ovps, v3 = _seen_box(seen=(0, 1, 3))  # the near corner and both sides
     h = 1.0
@@ -196,10 +209,13 @@ def test_the_pipeline_measures_the_range_of_a_rendered_box(pitch, roll):
     for (ahead, right), c in zip(est.contacts_ahead_right_m, flat, strict=True):
         assert ahead > 0.0  # pitch turns the image about its x axis: the side is the same
         assert roll != 0.0 or (right > 0.0) == (c.pixel[0] > image.shape[1] / 2)
-    # ... and the floor behind them, on the box's footprint to the range's accuracy.
-    assert est.footprint_ahead_right_m(0.0) == est.contacts_ahead_right_m
+    # ... the floor between them and behind them, on the box's footprint to the range's
+    # accuracy.
+    feet = est.footprint_ahead_right_m(0.0)
+    assert feet[:len(flat)] == est.contacts_ahead_right_m
+    assert len(feet) > len(flat) or len(flat) == 1  # the foot of a face between two feet
     more = est.footprint_ahead_right_m(0.5)
-    assert more[:len(flat)] == est.contacts_ahead_right_m and len(more) > len(flat)
+    assert more[:len(feet)] == feet and len(more) > len(feet)
     yaw = math.radians(cam.yaw_deg)
     box = [((x - cam.x) * math.cos(yaw) + (y - cam.y) * math.sin(yaw),
             -(x - cam.x) * math.sin(yaw) + (y - cam.y) * math.cos(yaw))

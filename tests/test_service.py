@@ -212,8 +212,11 @@ def test_companion_run_flies_the_mock_by_the_video_and_stops_on_sigterm(tmp_path
     port = free_udp_port()
     log = tmp_path / "decisions.jsonl"
     config = tmp_path / "companion.yaml"
+    # The sample's box stands in the path (camera at the mock's 2.5 m) on its first 3 s
+    # only: with resume_in_view a vehicle engaged later, on a loaded machine, would rightly
+    # not turn for it (test_supervisor.py). Here the service's plumbing is the point.
     config.write_text(f"mavlink:\n  url: udpin://127.0.0.1:{port}\noffboard:\n  enabled: true\n"
-                      f"service:\n  decision_log: {log}\n")
+                      f"service:\n  decision_log: {log}\npolicy:\n  resume_in_view: false\n")
     env = {**os.environ, "NOTIFY_SOCKET": notify_socket.path, "PYTHONPATH": str(ROOT)}
     ap = MockAutopilot(port, AutopilotParams(arm_ready_s=0.2, boot_in_air=True)).start()
     proc = subprocess.Popen(

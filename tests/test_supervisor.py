@@ -564,6 +564,47 @@ def test_the_course_resumes_only_on_a_path_clear_of_the_feet_measured_earlier():
     assert resume_past(((2.5, 0.2), far), replace(POLICY, resume_clearance_m=0.0))[0] == clear_t
 
 
+def resume_in_view(policy=POLICY, range_m=3.0, until=12.0):
+    """Cruise along 0°, see a face across the course at 3 s (feet 2.5 m ahead, 0.6 m either
+    side of it), fly the pass-off heading (30°) with the face still in view on every
+    frame, its foot measured (``range_m``) or not (None), and return the time the vehicle
+    starts back toward the course (None: not before ``until``) and the state then."""
+    step = cruising()
+    step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, range_m=2.5,
+                                    contacts_m=((2.5, 0.6), (2.5, -0.6))), 3.0, policy=policy)
+    assert step.state.target_deg == 30.0
+    t = 3.0
+    while t < until:
+        t = round(t + 0.05, 2)
+        seen = Decision(t, FORWARD, 5.0, 30.0, range_m=range_m)  # aligned enough: no new turn
+        step = fly(step.state, seen, t, yaw_deg=30.0, policy=policy)
+        if step.yaw_rate_deg_s < 0.0:
+            return t, step.state
+        assert step.yaw_rate_deg_s == 0.0
+    return None, step.state
+
+
+def test_in_view_the_course_resumes_once_the_path_back_clears_the_feet_measured():
+    from companion.control.policy import resume_path_clearance_m
+
+    t, state = resume_in_view()
+    assert t is not None and state.obstacle_t_s == t  # resumed with the face in view
+    feet = state.contacts_m
+    assert len(feet) == 2
+    args = (FLY.forward_speed_m_s, POLICY)
+    assert resume_path_clearance_m(feet, state.course_progress_m, state.course_offset_m, 30.0,
+                                   *args) >= POLICY.resume_clearance_m
+    back = 1.0 * 0.05  # one tick earlier on the pass-off heading: the path back met a foot
+    assert resume_path_clearance_m(
+        feet, state.course_progress_m - back * math.cos(math.radians(30.0)),
+        state.course_offset_m - back * math.sin(math.radians(30.0)), 30.0,
+        *args) < POLICY.resume_clearance_m
+    # Not while the frames see it without measuring its foot, nor with the rule off: the
+    # pass-off heading is held as long as the face is in view.
+    assert resume_in_view(range_m=None)[0] is None
+    assert resume_in_view(replace(POLICY, resume_in_view=False))[0] is None
+
+
 def test_back_on_the_course_a_foot_measured_in_its_path_turns_it_to_the_pass_off_again():
     step = cruising()  # course 0°, about 2 m along it
     step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, contacts_m=((5.0, 0.0),)), 3.0)

@@ -193,9 +193,12 @@ def avoidance_heading(eta_deg: float, heading_deg: float, course_deg: float,
 
 
 RESUME_HORIZON_S = 8.0
-"""How far ahead :func:`resume_path_clearance_m` predicts the resume: from 45° off the
-course at ``resume_max_rate_deg_s`` (10°/s) the heading is back on it in about 5 s; the
-rest is the straight flight after it."""
+"""How far ahead :func:`resume_path_clearance_m` predicts the resume at least: from 45° off
+the course at ``resume_max_rate_deg_s`` (10°/s) the heading is back on it in about 5 s; the
+rest is the straight flight after it. Beyond it, the prediction goes on until it is past
+every contact along the course, for at most :data:`RESUME_HORIZON_MAX_S`."""
+
+RESUME_HORIZON_MAX_S = 60.0
 
 
 def resume_path_clearance_m(contacts_m: tuple[tuple[float, float], ...], along_m: float,
@@ -208,16 +211,19 @@ def resume_path_clearance_m(contacts_m: tuple[tuple[float, float], ...], along_m
     right of it) in the frame whose origin is where offboard engaged; the vehicle is at
     (``along_m``, ``across_m``) with its heading ``heading_off_deg`` right of the course.
     The resume is predicted as :func:`heading_rate` flies it back to the course, at most
-    ``resume_max_rate_deg_s``, at ``speed_m_s``, for ``horizon_s``, the position sampled
-    every ``dt_s``. Not in the paper: a vehicle that lost an obstacle from view while
-    turning away from it resumed the course into it, where its feet had been measured
-    (docs/flight.md).
+    ``resume_max_rate_deg_s``, at ``speed_m_s``, for ``horizon_s`` and on until it is
+    ``resume_clearance_m`` past the farthest contact along the course (a foot on the
+    course far ahead is met however late), the position sampled every ``dt_s``. Not in
+    the paper: a vehicle that lost an obstacle from view while turning away from it
+    resumed the course into it, where its feet had been measured (docs/flight.md).
     """
     if not contacts_m:
         return math.inf
     path = [(along_m, across_m)]
     heading = heading_off_deg
-    for _ in range(max(1, round(horizon_s / dt_s))):
+    past = max(c[0] for c in contacts_m) + policy.resume_clearance_m
+    least, most = max(1, round(horizon_s / dt_s)), round(RESUME_HORIZON_MAX_S / dt_s)
+    while len(path) <= least or (along_m < past and len(path) <= most):
         heading += heading_rate(0.0, heading, policy, policy.resume_max_rate_deg_s) * dt_s
         h = math.radians(heading)
         along_m += speed_m_s * dt_s * math.cos(h)

@@ -27,10 +27,14 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   and back to the course once no obstacle has been seen for ``policy.resume_after_s``
   (:func:`~companion.control.policy.avoidance_heading`, ``heading_rate``), unless the
   path back (predicted by ``policy.resume_path_clearance_m``) would pass within
-  ``policy.resume_clearance_m`` of a floor contact measured earlier, or of the floor
-  taken to be covered behind one (``policy.hidden_depth_m``, :func:`remembered_contacts`):
-  then the pass-off heading is flown, held off the course or, back on it with such a foot
-  ahead, turned to again. A frame whose scene
+  ``policy.resume_clearance_m`` of a floor contact measured earlier, of the floor between
+  two of an obstacle's contacts, or of the floor taken to be covered behind them
+  (``policy.hidden_depth_m``, :func:`remembered_contacts`): then the pass-off heading is
+  flown, held off the course or, back on it with such a foot ahead, turned to again.
+  With ``policy.resume_in_view``, an obstacle still in view whose feet the newest frame
+  that saw it measured holds the vehicle off the course only while that path back does
+  not clear them: it neither flies on away from the course once clear of it, nor turns
+  for a piece whose measured feet leave the course clear. A frame whose scene
   is not understood (``hold``) stops the vehicle but not this turn, which rests on
   earlier frames and the reported heading: stopped and still, the view would never change;
 - forward speed (:func:`forward_speed_setpoint`): ``offboard.forward_speed_m_s`` while
@@ -120,6 +124,7 @@ class SupervisorState:
     tick_t_s: float | None = None  # when it was streamed
     course_deg: float | None = None  # the heading when offboard engaged: the pilot's course
     obstacle_t_s: float | None = None  # when a decision last saw an obstacle
+    seen_ranged: bool = False  # and whether that decision measured its floor contact
     target_deg: float | None = None  # the heading flown to pass it
     target_from_t_s: float | None = None  # the decision that set it
     pass_side: int = 0  # the side of the course it passes on (+1 right, -1 left; 0: none)
@@ -230,7 +235,8 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
         # An engagement starts with nothing seen: what an earlier one saw, the heading it
         # flew to pass it and its side belong to another course and place in the room.
         mem = replace(prev, **_FORGOTTEN_ON_ENGAGING) if engaged_now else prev
-        keep = {"obstacle_t_s": mem.obstacle_t_s, "target_deg": mem.target_deg,
+        keep = {"obstacle_t_s": mem.obstacle_t_s, "seen_ranged": mem.seen_ranged,
+                "target_deg": mem.target_deg,
                 "target_from_t_s": mem.target_from_t_s, "pass_side": mem.pass_side,
                 "foot_abeam_m": mem.foot_abeam_m}
         if config.forward_speed_m_s > 0.0:
@@ -251,15 +257,21 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
             # The course resumes resume_after_s after the obstacle left the view, and once
             # as far has been flown as that takes at full speed: a vehicle slowed by range
             # has not yet passed what it last saw beside it.
-            passed = seen_t is None or (
+            left_view = seen_t is None or (
                 now_s - seen_t >= policy.resume_after_s
                 and flown >= policy.resume_after_s * config.forward_speed_m_s - 1e-9)
+            # Still in view, once its feet are measured: the vehicle need not fly on away
+            # from the course after the path back is seen to be clear of them.
+            guarded = policy.resume_course and policy.resume_clearance_m > 0.0
+            in_view = (guarded and policy.resume_in_view and not left_view
+                       and keep["seen_ranged"] and bool(keep["contacts_m"]))
+            clearance = (resume_path_clearance_m(keep["contacts_m"], progress, offset,
+                                                 off_course, config.forward_speed_m_s, policy)
+                         if guarded and (left_view or in_view) else math.inf)
+            passed = left_view or (in_view and clearance >= policy.resume_clearance_m)
             # ... and not onto a path that passes an obstacle foot measured earlier: the
             # obstacle left the view, not the room.
-            blocked = (passed and policy.resume_course and policy.resume_clearance_m > 0.0
-                       and resume_path_clearance_m(keep["contacts_m"], progress, offset,
-                                                   off_course, config.forward_speed_m_s, policy)
-                       < policy.resume_clearance_m)
+            blocked = passed and clearance < policy.resume_clearance_m
             foot = keep.get("foot_abeam_m")
             if (passed and (foot is None or progress >= foot)
                     and (not policy.resume_course
@@ -330,7 +342,8 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
     return step("waiting" if prev.enabled else "disabled")
 
 
-_FORGOTTEN_ON_ENGAGING = {"obstacle_t_s": None, "target_deg": None, "target_from_t_s": None,
+_FORGOTTEN_ON_ENGAGING = {"obstacle_t_s": None, "seen_ranged": False, "target_deg": None,
+                          "target_from_t_s": None,
                           "pass_side": 0, "path_m": None, "path_t_s": None,
                           "flown_since_seen_m": 0.0, "course_progress_m": 0.0,
                           "foot_abeam_m": None, "course_offset_m": 0.0, "contacts_m": (),
@@ -355,7 +368,7 @@ def _pass_target(keep: dict, decision: Decision | None, fresh: bool, course_deg:
     if decision.range_m is not None and decision.t_s != keep.get("obstacle_t_s"):
         # A foot range_m away is abeam once that far has been flown along the course.
         keep = {**keep, "foot_abeam_m": keep.get("course_progress_m", 0.0) + decision.range_m}
-    keep = {**keep, "obstacle_t_s": decision.t_s}
+    keep = {**keep, "obstacle_t_s": decision.t_s, "seen_ranged": decision.range_m is not None}
     if (decision.heading_deg is None or decision.t_s == keep.get("target_from_t_s")
             or not turns_for(decision.confirmed, decision.range_m, policy)):
         return keep  # seen, so the course does not resume toward it, but not turned for

@@ -41,7 +41,13 @@ from companion.vision.lines import (
     to_gray,
 )
 from companion.vision.obstacles import Obstacle, find_obstacles
-from companion.vision.ranging import FloorContact, floor_contacts, hidden_extent, path_distance
+from companion.vision.ranging import (
+    FloorContact,
+    floor_contacts,
+    foot_line,
+    hidden_extent,
+    path_distance,
+)
 from companion.vision.tracking import Track, update_track
 from companion.vision.vanishing import (
     NONE,
@@ -269,17 +275,22 @@ class Estimate:
 
     def footprint_ahead_right_m(self, hidden_depth_m: float = 0.0
                                 ) -> tuple[tuple[float, float], ...]:
-        """:attr:`contacts_ahead_right_m`, and with ``hidden_depth_m`` > 0 the floor each
-        obstacle is taken to cover behind them (:func:`~companion.vision.ranging.hidden_extent`);
-        each (m ahead of the camera, m to its right)."""
-        if hidden_depth_m <= 0.0 or not self.camera_height_m or not any(self.obstacle_contacts):
-            return self.contacts_ahead_right_m
+        """:attr:`contacts_ahead_right_m`, the floor between an obstacle's neighbouring
+        contacts (:func:`~companion.vision.ranging.foot_line`), and with ``hidden_depth_m``
+        > 0 the floor each obstacle is taken to cover behind them
+        (:func:`~companion.vision.ranging.hidden_extent`); each (m ahead of the camera, m
+        to its right)."""
+        if not any(self.obstacle_contacts):
+            return ()
+        between = (p for contacts in self.obstacle_contacts for p in foot_line(contacts))
+        if hidden_depth_m <= 0.0:
+            return self.contacts_ahead_right_m + tuple(between)
         centre = principal_point(self.width, self.height)
         behind = (p for o, contacts in zip(self.obstacles, self.obstacle_contacts, strict=True)
                   for p in hidden_extent(o.corners_px, contacts, o.ovps, self.layout.vps[V3],
                                          self.layout.focal_px, centre, self.camera_height_m,
                                          hidden_depth_m))
-        return self.contacts_ahead_right_m + tuple(behind)
+        return self.contacts_ahead_right_m + tuple(between) + tuple(behind)
 
     @property
     def range_m(self) -> float | None:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FloorContact", "floor_point", "floor_points", "floor_contacts", "obstacle_contact",
-           "down_direction", "path_distance", "hidden_extent"]
+           "down_direction", "path_distance", "foot_line", "hidden_extent"]
 
 VERTICAL_EDGE_TOL_DEG = 2.0
 """two corners are on one vertical edge when their line points at V3 within this"""
@@ -170,6 +170,26 @@ def floor_contacts(corners_px: np.ndarray, v3: np.ndarray, focal_px: float,
                   key=lambda c: c.bearing_deg)
 
 
+def _between(a: tuple[float, float], b: tuple[float, float], step_m: float
+             ) -> list[tuple[float, float]]:
+    """Points from ``a`` (excluded) to ``b`` (included) on the floor, evenly spaced at most
+    ``step_m`` apart; each (m ahead, m right)."""
+    steps = max(1, math.ceil(math.hypot(b[0] - a[0], b[1] - a[1]) / step_m - 1e-9))
+    return [(a[0] + (b[0] - a[0]) * k / steps, a[1] + (b[1] - a[1]) * k / steps)
+            for k in range(1, steps + 1)]
+
+
+def foot_line(contacts: Sequence[FloorContact], step_m: float = 0.25
+              ) -> list[tuple[float, float]]:
+    """Floor points between neighbouring contacts of one obstacle (``contacts`` sorted by
+    bearing, :func:`floor_contacts`), at most ``step_m`` apart, each (m ahead of the
+    camera, m to its right): the foot of the face seen between two feet, as
+    :func:`path_distance` takes it. A face across the path between two feet beside it
+    stands in the path although neither foot does."""
+    pts = [c.ahead_right_m for c in contacts]
+    return [p for a, b in zip(pts, pts[1:], strict=False) for p in _between(a, b, step_m)[:-1]]
+
+
 def _cross(a, b) -> tuple[float, float, float]:
     """a × b of two 3-sequences: the line through two homogeneous points, or the point
     where two lines meet."""
@@ -238,9 +258,7 @@ def hidden_extent(corners_px: np.ndarray, contacts: Sequence[FloorContact], ovps
             if any(t < -step_m for t in along):
                 continue  # a corner on the near side: the face seen ends at this foot
             reach = max([depth_m, *along])
-            steps = max(1, math.ceil(reach / step_m - 1e-9))
-            out += [(fa + a * reach * k / steps, fr + b * reach * k / steps)
-                    for k in range(1, steps + 1)]
+            out += _between((fa, fr), (fa + a * reach, fr + b * reach), step_m)
     return out
 
 
