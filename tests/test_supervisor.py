@@ -605,6 +605,17 @@ def test_in_view_the_course_resumes_once_the_path_back_clears_the_feet_measured(
     assert resume_in_view(replace(POLICY, resume_in_view=False))[0] is None
 
 
+def test_a_piece_whose_feet_are_measured_clear_of_the_course_is_not_turned_for():
+    beside = Decision(3.0, RIGHT, 40.0, 0.0, range_m=3.0,
+                      contacts_m=((3.0, -2.0), (3.5, -1.5)))  # 1.5 m left of the course
+    assert fly(cruising().state, beside, 3.0).yaw_rate_deg_s == 0.0
+    off = replace(POLICY, resume_in_view=False)
+    assert fly(cruising().state, beside, 3.0, policy=off).yaw_rate_deg_s == 30.0
+    # In the path, it is turned for.
+    ahead = replace(beside, contacts_m=((3.0, -0.3), (3.5, 0.2)))
+    assert fly(cruising().state, ahead, 3.0).yaw_rate_deg_s == 30.0
+
+
 def test_back_on_the_course_a_foot_measured_in_its_path_turns_it_to_the_pass_off_again():
     step = cruising()  # course 0°, about 2 m along it
     step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, contacts_m=((5.0, 0.0),)), 3.0)
