@@ -106,6 +106,11 @@ class PolicyConfig:
     """the course resumes while the obstacle is still in view, once its feet are measured
     and the predicted resume keeps resume_clearance_m from every contact and the floor
     between and behind them (else only once it left the view)"""
+    least_turn: bool = True
+    """once the obstacle's feet are measured, the heading flown to pass it is the one
+    nearest the course, but min_avoid_deg off it at least, whose straight path keeps
+    resume_clearance_m from them and the floor between and behind them
+    (policy.clearing_heading), where that is nearer the course than the face's own"""
     # Once the pass-off is taken on one side of the course, frames asking for the other
     # side are not acted on until the vehicle is back on the course and past the last
     # obstacle foot measured (policy.keeps_side).

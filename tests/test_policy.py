@@ -206,3 +206,59 @@ def test_the_resume_is_predicted_as_flown_a_circle_at_the_capped_rate_then_strai
               centre[1] + (radius - 0.3) * math.cos(math.radians(20.0)))
     assert resume_path_clearance_m((inside,), 0.0, 0.0, 30.0, 1.0, p) == pytest.approx(
         0.3, abs=0.02)
+
+
+def _nearest_along(contact, along, across, heading_deg, length_m=30.0, step_m=0.001):
+    """The nearest a straight path comes to ``contact``, by walking it (a check of
+    clearing_heading that shares none of its arithmetic)."""
+    h = math.radians(heading_deg)
+    return min(math.hypot(contact[0] - along - s * math.cos(h),
+                          contact[1] - across - s * math.sin(h))
+               for s in (k * step_m for k in range(round(length_m / step_m))))
+
+
+def test_the_heading_flown_past_measured_feet_is_the_least_turn_that_clears_them():
+    from companion.control.policy import clearing_heading
+
+    # The geometry first, with no pass-off angle.
+    p = PolicyConfig(resume_clearance_m=0.5, min_avoid_deg=0.0)
+    # A face across the course 4-5 m ahead, its right end 1 m right of it; the face's
+    # heading (Table II) is 40° right, the course 2°.
+    feet = ((4.0, -0.4), (4.6, 0.3), (5.1, 1.0))
+    heading = clearing_heading(feet, 0.0, 0.0, 2.0, 42.0, p)
+    assert 2.0 < heading < 42.0
+    off = heading - 2.0  # feet and path in the course's frame
+    assert off == round(off)  # whole degrees off the course
+    assert min(_nearest_along(f, 0.0, 0.0, off) for f in feet) >= 0.5
+    assert min(_nearest_along(f, 0.0, 0.0, off - 1.0) for f in feet) < 0.5
+    # Passed on the left, the same on the left.
+    mirrored = tuple((a, -r) for a, r in feet)
+    assert clearing_heading(mirrored, 0.0, 0.0, 0.0, -40.0, p) == -clearing_heading(
+        feet, 0.0, 0.0, 0.0, 40.0, p)
+    # Feet beside the course: the course itself; none known, or the rule off: the face's.
+    assert clearing_heading(((4.0, -1.5),), 0.0, 0.0, 2.0, 42.0, p) == 2.0
+    assert clearing_heading((), 0.0, 0.0, 2.0, 42.0, p) == 42.0
+    no_clearance = PolicyConfig(resume_clearance_m=0.0, min_avoid_deg=0.0)
+    assert clearing_heading(feet, 0.0, 0.0, 2.0, 42.0, no_clearance) == 42.0
+    # No heading up to the face's clears a foot straight ahead at 0.6 m: the face's.
+    assert clearing_heading(((0.6, 0.0),), 0.0, 0.0, 0.0, 30.0, p) == 30.0
+    # A foot already nearer than the clearance is not to be neared: one abeam is cleared
+    # by the course; one 0.1 m ahead and 0.3 m right (bearing 71.6°) by the first whole
+    # degree at a right angle to it or beyond (-18.4°).
+    assert clearing_heading(((0.0, -0.3),), 0.0, 0.0, 0.0, 30.0, p) == 0.0
+    assert clearing_heading(((0.1, 0.3),), 0.0, 0.0, 0.0, -30.0, p) == -19.0
+    # Seen from 1 m along and 0.5 m right of the course, the feet need less.
+    assert clearing_heading(feet, 1.0, 0.5, 2.0, 42.0, p) < heading
+
+    # Never nearer the course than the pass-off angle (30°): feet that the course itself
+    # clears, or a few degrees, still get 30°; feet that need more get what they need.
+    p30 = PolicyConfig(resume_clearance_m=0.5, min_avoid_deg=30.0)
+    assert clearing_heading(((4.0, -1.5),), 0.0, 0.0, 2.0, 42.0, p30) == 32.0
+    assert clearing_heading(feet, 0.0, 0.0, 2.0, 42.0, p30) == 32.0
+    # (The floor between feet is sampled as ranging.foot_line samples it: 0.25 m apart.)
+    wide = tuple((3.0 + 0.8 * k / 10, -0.4 + 2.4 * k / 10) for k in range(11))
+    needed = clearing_heading(wide, 0.0, 0.0, 0.0, 44.0, p)
+    assert 30.0 < needed < 44.0
+    assert clearing_heading(wide, 0.0, 0.0, 0.0, 44.0, p30) == needed
+    # A face's heading at the pass-off angle or nearer is the face's.
+    assert clearing_heading(feet, 0.0, 0.0, 0.0, 25.0, p30) == 25.0

@@ -518,7 +518,10 @@ def test_a_foot_measured_again_replaces_its_earlier_measurement():
     assert 0.05 < CONTACT_MERGE_M < 0.25
 
 
-def resume_past(contacts, policy=POLICY):
+HELD = replace(POLICY, least_turn=False)  # the pass-off heading held as Table II sets it
+
+
+def resume_past(contacts, policy=HELD):
     """Cruise along 0°, see a face 40° right with ``contacts`` (ahead, right of the camera,
     m) at 3 s, fly the pass-off heading (30°) with nothing more in view, and return the
     time the vehicle starts back toward the course and the state then."""
@@ -561,10 +564,10 @@ def test_the_course_resumes_only_on_a_path_clear_of_the_feet_measured_earlier():
         across - back * math.sin(math.radians(30.0)), 30.0, FLY.forward_speed_m_s,
         POLICY) < POLICY.resume_clearance_m
     # With the rule off, the course resumes at the usual time.
-    assert resume_past(((2.5, 0.2), far), replace(POLICY, resume_clearance_m=0.0))[0] == clear_t
+    assert resume_past(((2.5, 0.2), far), replace(HELD, resume_clearance_m=0.0))[0] == clear_t
 
 
-def resume_in_view(policy=POLICY, range_m=3.0, until=12.0):
+def resume_in_view(policy=HELD, range_m=3.0, until=12.0):
     """Cruise along 0°, see a face across the course at 3 s (feet 2.5 m ahead, 0.6 m either
     side of it), fly the pass-off heading (30°) with the face still in view on every
     frame, its foot measured (``range_m``) or not (None), and return the time the vehicle
@@ -602,30 +605,70 @@ def test_in_view_the_course_resumes_once_the_path_back_clears_the_feet_measured(
     # Not while the frames see it without measuring its foot, nor with the rule off: the
     # pass-off heading is held as long as the face is in view.
     assert resume_in_view(range_m=None)[0] is None
-    assert resume_in_view(replace(POLICY, resume_in_view=False))[0] is None
+    assert resume_in_view(replace(HELD, resume_in_view=False))[0] is None
 
 
 def test_a_piece_whose_feet_are_measured_clear_of_the_course_is_not_turned_for():
     beside = Decision(3.0, RIGHT, 40.0, 0.0, range_m=3.0,
                       contacts_m=((3.0, -2.0), (3.5, -1.5)))  # 1.5 m left of the course
-    assert fly(cruising().state, beside, 3.0).yaw_rate_deg_s == 0.0
-    off = replace(POLICY, resume_in_view=False)
+    assert fly(cruising().state, beside, 3.0, policy=HELD).yaw_rate_deg_s == 0.0
+    off = replace(HELD, resume_in_view=False)
     assert fly(cruising().state, beside, 3.0, policy=off).yaw_rate_deg_s == 30.0
+    # The least turn alone keeps the pass-off angle: it is turned for.
+    least = replace(POLICY, resume_in_view=False)
+    assert fly(cruising().state, beside, 3.0, policy=least).yaw_rate_deg_s == 30.0
     # In the path, it is turned for.
     ahead = replace(beside, contacts_m=((3.0, -0.3), (3.5, 0.2)))
-    assert fly(cruising().state, ahead, 3.0).yaw_rate_deg_s == 30.0
+    assert fly(cruising().state, ahead, 3.0, policy=HELD).yaw_rate_deg_s == 30.0
 
 
 def test_back_on_the_course_a_foot_measured_in_its_path_turns_it_to_the_pass_off_again():
     step = cruising()  # course 0°, about 2 m along it
-    step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, contacts_m=((5.0, 0.0),)), 3.0)
+    step = fly(step.state, Decision(3.0, RIGHT, 40.0, 0.0, contacts_m=((5.0, 0.0),)), 3.0,
+               policy=HELD)
     assert step.state.target_deg == 30.0
     t = 3.0
     while t < 6.0:  # on the course, nothing in view, the foot 5 m ahead on it
         t = round(t + 0.05, 2)
-        step = fly(step.state, Decision(t, FORWARD), t, yaw_deg=0.0)
+        step = fly(step.state, Decision(t, FORWARD), t, yaw_deg=0.0, policy=HELD)
     assert step.state.course_progress_m < step.state.contacts_m[0][0]
     assert step.yaw_rate_deg_s == POLICY.max_yaw_rate_deg_s  # toward 30°, not held at 0°
     off = fly(step.state, Decision(6.05, FORWARD), 6.05, yaw_deg=0.0,
-              policy=replace(POLICY, resume_clearance_m=0.0))
+              policy=replace(HELD, resume_clearance_m=0.0))
     assert off.yaw_rate_deg_s == 0.0
+
+
+def test_past_measured_feet_the_least_turn_that_clears_them_is_flown():
+    from companion.control.policy import clearing_heading
+
+    wide = replace(POLICY, max_turn_deg=45.0, resume_in_view=False)
+
+    def settle(policy):
+        """Cruise along 0°, see a face 42° right, its foot from 4.0 m ahead and 0.4 m left
+        to 4.8 m ahead and 2.0 m right, then fly on with it in view (each frame sees it
+        42° right of the course), the heading following the yaw rate streamed; the
+        heading after 3 s."""
+        step = cruising()
+        feet = tuple((4.0 + 0.8 * k / 10, -0.4 + 2.4 * k / 10) for k in range(11))
+        step = fly(step.state, Decision(3.0, RIGHT, 42.0, 0.0, range_m=4.0, contacts_m=feet),
+                   3.0, policy=policy)
+        yaw, t = 0.0, 3.0
+        while t < 6.0:
+            yaw += step.yaw_rate_deg_s * 0.05
+            t = round(t + 0.05, 2)
+            eta = 42.0 - yaw
+            seen = Decision(t, RIGHT if eta > POLICY.deadband_deg else FORWARD, eta, yaw)
+            step = fly(step.state, seen, t, yaw_deg=yaw, policy=policy)
+        return yaw, step.state
+
+    # Table II's heading, approached until within the deadband.
+    held, _ = settle(replace(wide, least_turn=False))
+    assert held == pytest.approx(42.0, abs=POLICY.deadband_deg + 0.1)
+    # The least turn: short of the face's, and not short of the pass-off angle ...
+    least, state = settle(wide)
+    assert POLICY.min_avoid_deg - POLICY.deadband_deg <= least < held - POLICY.deadband_deg
+    # ... within the deadband of the least heading whose path clears the feet from where
+    # the vehicle now is.
+    assert least == pytest.approx(clearing_heading(
+        state.contacts_m, state.course_progress_m, state.course_offset_m, 0.0,
+        state.target_deg, wide), abs=POLICY.deadband_deg + 1.0)

@@ -45,6 +45,13 @@ paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
   ``supervisor.supervise``), the heading goes back to the course (the heading offboard
   engaged with) at most ``resume_max_rate_deg_s``.
 
+- the least turn (``least_turn``): once an obstacle's feet are measured, the heading
+  flown to pass it is the one nearest the course, but at least ``min_avoid_deg`` off it,
+  whose straight path keeps ``resume_clearance_m`` from them (:func:`clearing_heading`),
+  when that is nearer the course than the face's. Aligned with a face 42° off the
+  course, the vehicle carried on across the room into furniture beside the path after
+  it had cleared the obstacle.
+
 Range, when the camera height is known (:mod:`~companion.vision.ranging`, not in the
 paper): an obstacle whose floor contact is measured beyond ``act_within_m`` is not turned
 for (:func:`obstacle_matters`): far away, its face says little about the path the vehicle
@@ -63,7 +70,8 @@ import numpy as np
 
 from companion.config import PolicyConfig
 
-__all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "confirm_reversal",
+__all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "clearing_heading",
+           "confirm_reversal",
            "decide_frame", "decide_turn", "heading_rate", "keeps_side", "obstacle_matters",
            "pass_side", "path_speed_scale", "resume_path_clearance_m", "steering_eta", "turns_for",
            "wrap_deg"]
@@ -231,6 +239,46 @@ def resume_path_clearance_m(contacts_m: tuple[tuple[float, float], ...], along_m
         path.append((along_m, across_m))
     gaps = np.asarray(path)[:, None, :] - np.asarray(contacts_m, float)[None, :, :]
     return float(np.sqrt((gaps ** 2).sum(axis=2)).min())
+
+
+def clearing_heading(contacts_m: tuple[tuple[float, float], ...], along_m: float,
+                     across_m: float, course_deg: float, target_deg: float,
+                     policy: PolicyConfig, step_deg: float = 1.0) -> float:
+    """The heading (deg, right positive) nearest the course, from ``min_avoid_deg`` off it
+    to ``target_deg``, whose straight path keeps ``resume_clearance_m`` from every floor
+    contact remembered (a contact already nearer is not to be neared); ``target_deg`` if
+    none does.
+
+    ``contacts_m`` and the vehicle's position (``along_m``, ``across_m``) are as in
+    :func:`resume_path_clearance_m`; headings are tried every ``step_deg`` off the course,
+    on the side of ``target_deg``. Not in the paper: Table II aligns the vehicle with the
+    obstacle's face, up to 45° off the course, however little of that turn its feet need;
+    the vehicle then drifted across the room into furniture beside the path
+    (docs/flight.md). With the feet measured, no more of that turn is flown than passes
+    them, and never less than the pass-off angle: the feet one view measures need not be
+    all of the piece (a face seen whole, its neighbour hidden), and flown by the least
+    turn alone, a vehicle passed at half the clearance and met pieces measured in part.
+    The straight path is a fair test: from a heading farther off the course, the turn
+    toward it swings the vehicle wide of the course, away from the feet it passes.
+    """
+    target_off = wrap_deg(target_deg - course_deg)
+    least = min(policy.min_avoid_deg, abs(target_off))
+    if not contacts_m or policy.resume_clearance_m <= 0.0 or abs(target_off) <= least:
+        return target_deg
+    n = int((abs(target_off) - least) // step_deg)
+    offsets = np.append(least + np.arange(n + 1) * step_deg, abs(target_off))
+    angles = np.radians(math.copysign(1.0, target_off) * offsets)
+    heading = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # H×2, along and across
+    gaps = np.asarray(contacts_m, float) - (along_m, across_m)  # C×2
+    now = np.hypot(gaps[:, 0], gaps[:, 1])
+    ahead = np.maximum(gaps @ heading.T, 0.0)  # C×H: how far along each path it is nearest
+    nearest = np.hypot(gaps[:, 0, None] - ahead * heading[:, 0],
+                       gaps[:, 1, None] - ahead * heading[:, 1])
+    clear = (nearest >= np.minimum(now, policy.resume_clearance_m)[:, None] - 1e-9).all(axis=0)
+    first = int(np.argmax(clear))
+    if not clear[first]:
+        return target_deg
+    return wrap_deg(course_deg + float(np.degrees(angles[first])))
 
 
 def heading_rate(target_deg: float, heading_deg: float, policy: PolicyConfig,

@@ -30,7 +30,11 @@ vertical velocity 0 (PX4 holds the altitude; vision never commands it):
   ``policy.resume_clearance_m`` of a floor contact measured earlier, of the floor between
   two of an obstacle's contacts, or of the floor taken to be covered behind them
   (``policy.hidden_depth_m``, :func:`remembered_contacts`): then the pass-off heading is
-  flown, held off the course or, back on it with such a foot ahead, turned to again.
+  flown, held off the course or, back on it with such a foot ahead, turned to again;
+  with ``policy.least_turn`` that heading is the least turn off the course (at least
+  ``policy.min_avoid_deg``) whose straight path keeps ``resume_clearance_m`` from the
+  contacts remembered, when that is less than the face's
+  (:func:`~companion.control.policy.clearing_heading`).
   With ``policy.resume_in_view``, an obstacle still in view whose feet the newest frame
   that saw it measured holds the vehicle off the course only while that path back does
   not clear them: it neither flies on away from the course once clear of it, nor turns
@@ -63,6 +67,7 @@ from companion.config import OffboardConfig, PolicyConfig
 from companion.control.policy import (
     TurnCommand,
     avoidance_heading,
+    clearing_heading,
     heading_rate,
     keeps_side,
     obstacle_matters,
@@ -286,6 +291,9 @@ def supervise(prev: SupervisorState, vehicle: VehicleStatus, decision: Decision 
                     rate = heading_rate(course, vehicle.yaw_deg, policy,
                                         policy.resume_max_rate_deg_s)
                 elif target is not None:
+                    if guarded and policy.least_turn:
+                        target = clearing_heading(keep["contacts_m"], progress, offset,
+                                                  course, target, policy)
                     rate = heading_rate(target, vehicle.yaw_deg, policy)
                     to_turn = abs(wrap_deg(target - vehicle.yaw_deg)) / policy.max_turn_deg
                     # A cap, not a factor on the streamed speed: multiplied in every tick,
