@@ -43,8 +43,7 @@ paper, each measured in ``companion sim --scenario approach`` (docs/flight.md):
   obstacle behind and flew on into the side wall. Once no obstacle has been in view for
   ``resume_after_s`` (and, flying slower, for as far as full speed covers in that time:
   ``supervisor.supervise``), the heading goes back to the course (the heading offboard
-  engaged with) at most ``resume_max_rate_deg_s``.
-
+  engaged with) at most ``resume_max_rate_deg_s``;
 - the least turn (``least_turn``): once an obstacle's feet are measured, the heading
   flown to pass it is the one nearest the course, but at least ``min_avoid_deg`` off it,
   whose straight path keeps ``resume_clearance_m`` from them (:func:`clearing_heading`),
@@ -71,10 +70,9 @@ import numpy as np
 from companion.config import PolicyConfig
 
 __all__ = ["TurnCommand", "TurnHistory", "avoidance_heading", "clearing_heading",
-           "confirm_reversal",
-           "decide_frame", "decide_turn", "heading_rate", "keeps_side", "obstacle_matters",
-           "pass_side", "path_speed_scale", "resume_path_clearance_m", "steering_eta", "turns_for",
-           "wrap_deg"]
+           "confirm_reversal", "decide_frame", "decide_turn", "heading_rate", "keeps_side",
+           "obstacle_matters", "pass_side", "path_speed_scale", "resume_path_clearance_m",
+           "steering_eta", "turns_for", "wrap_deg"]
 
 Action = Literal["left", "right", "forward", "hold"]
 
