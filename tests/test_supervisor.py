@@ -518,6 +518,17 @@ def test_a_foot_measured_again_replaces_its_earlier_measurement():
     assert 0.05 < CONTACT_MERGE_M < 0.25
 
 
+def test_a_contact_the_vehicle_flies_over_is_forgotten():
+    from companion.control.supervisor import remembered_contacts
+
+    # The vehicle 2 m along the course and 1 m right of it: a contact 0.2 m from it is
+    # where it flies (within half resume_clearance_m, 0.25 m); one 0.3 m away is kept.
+    state = SupervisorState("active", True, contacts_m=((2.2, 1.0), (2.0, 1.3), (4.0, 1.0)))
+    contacts, _ = remembered_contacts(state, None, False, 0.0, 2.0, 1.0, POLICY)
+    assert 0.2 < 0.5 * POLICY.resume_clearance_m < 0.3
+    assert contacts == ((2.0, 1.3), (4.0, 1.0))
+
+
 HELD = replace(POLICY, least_turn=False)  # the pass-off heading held as Table II sets it
 
 
@@ -565,6 +576,22 @@ def test_the_course_resumes_only_on_a_path_clear_of_the_feet_measured_earlier():
         POLICY) < POLICY.resume_clearance_m
     # With the rule off, the course resumes at the usual time.
     assert resume_past(((2.5, 0.2), far), replace(HELD, resume_clearance_m=0.0))[0] == clear_t
+
+
+def test_contacts_along_the_path_flown_hold_off_the_course_only_until_flown_over():
+    # A frame that misread the box put its "feet" on the very line the pass-off heading
+    # (30°) flies, 1 to 3 m on from where the vehicle saw it (2 m along the course).
+    ray = tuple((d * math.cos(math.radians(30.0)), d * math.sin(math.radians(30.0)))
+                for d in (1.0, 1.5, 2.0, 2.5, 3.0))
+    clear_t, _ = resume_past(())
+    t, state = resume_past(ray)
+    assert t > clear_t + 0.5  # the path back met those still ahead
+    # It resumed as soon as it had flown over the last: all are forgotten, and it is
+    # still beside where that one was (remembered, the path back from here meets it).
+    last = (2.0 + ray[-1][0], ray[-1][1])
+    assert state.contacts_m == ()
+    assert math.hypot(state.course_progress_m - last[0],
+                      state.course_offset_m - last[1]) < POLICY.resume_clearance_m
 
 
 def resume_in_view(policy=HELD, range_m=3.0, until=12.0):

@@ -413,9 +413,13 @@ def remembered_contacts(prev: SupervisorState, decision: Decision | None, fresh:
     ``act_within_m`` (nearer ones are measured better: the range error grows with its
     square), each replacing those remembered within :data:`CONTACT_MERGE_M` of it; a
     contact farther behind the vehicle than ``resume_clearance_m`` is forgotten, as no
-    path ahead can pass nearer to it; at most :data:`CONTACT_MEMORY`.
+    path ahead can pass nearer to it, and so is one the vehicle has come within half
+    ``resume_clearance_m`` of: flown over, it was no piece reaching the flight height (a
+    frame that misread a box leaves contacts along the very path flown, which would
+    otherwise hold the vehicle off its course); at most :data:`CONTACT_MEMORY`.
     """
-    kept = [c for c in prev.contacts_m if c[0] >= along_m - policy.resume_clearance_m]
+    kept = [c for c in prev.contacts_m if c[0] >= along_m - policy.resume_clearance_m
+            and math.hypot(c[0] - along_m, c[1] - across_m) >= 0.5 * policy.resume_clearance_m]
     since = prev.contacts_t_s
     if (fresh and decision is not None and decision.t_s != since
             and decision.heading_deg is not None):
