@@ -97,7 +97,9 @@ class PolicyConfig:
     resume_max_rate_deg_s: float = field(default=10.0, metadata=_range(0.5, 90.0))
     resume_clearance_m: float = field(default=0.5, metadata=_range(0.0, 5.0))
     """the course does not resume while the predicted resume passes nearer than this to a
-    floor contact measured earlier (policy.resume_path_clearance_m); 0: the rule off"""
+    floor contact measured earlier (policy.resume_path_clearance_m); 0: the rule off. A
+    contact within half of it of the vehicle is taken as flown over and forgotten, so at
+    least twice the vehicle's radius"""
     hidden_depth_m: float = field(default=1.0, metadata=_range(0.0, 10.0))
     """... nor to the floor an obstacle is taken to cover behind its feet, this far along
     each face that leads away from the camera (vision/ranging.py ``hidden_extent``): one
