@@ -102,8 +102,9 @@ class PolicyConfig:
     least twice the vehicle's radius"""
     hidden_depth_m: float = field(default=1.0, metadata=_range(0.0, 10.0))
     """... nor to the floor an obstacle is taken to cover behind its feet, this far along
-    each face that leads away from the camera (vision/ranging.py ``hidden_extent``): one
-    view does not show how deep a piece is; 0: the feet alone"""
+    each face that leads away from the camera, nor to the foot of a face seen back to a
+    corner whose own foot is not measured (vision/ranging.py ``hidden_extent``): one view
+    does not show how deep a piece is; 0: the feet alone"""
     resume_in_view: bool = True
     """the course resumes while the obstacle is still in view, once its feet are measured
     and the predicted resume keeps resume_clearance_m from every contact and the floor

@@ -189,6 +189,23 @@ def test_a_face_seen_alone_is_not_taken_past_its_far_foot():
     assert max(float((np.array(p) - near) @ (left - near)) / 0.8 for p in got) <= 0.8 + 1e-6
 
 
+def test_a_face_seen_back_to_a_corner_whose_foot_is_hidden_is_taken_to_that_corner():
+    # The left foot measured; of the near corner only the top is seen (its foot hidden
+    # or below the view), so no second foot bounds the face between them. That face is
+    # seen, and it lies across the way back to the course: its floor is covered.
+    floor, pixels, ovps, v3 = _seen_box(seen=(1, 0), pitch=0.0, roll=0.0)
+    pixels = pixels[[0, 1, 3]]  # the left edge, the near edge's top
+    feet = floor_contacts(pixels, v3, F, CENTRE, 1.0)
+    assert len(feet) == 1
+    got = hidden_extent(pixels, feet, ovps, v3, F, CENTRE, 1.0, depth_m=0.5)
+    assert got and all(_inside(p, floor, 1e-6) for p in got)
+    near, left = np.array(floor[0]), np.array(floor[1])
+    assert min(np.linalg.norm(np.array(p) - near) for p in got) < 1e-6  # to the corner
+    u = (left - near) / np.linalg.norm(left - near)
+    on_face = [p for p in got if abs(u[0] * (p[1] - near[1]) - u[1] * (p[0] - near[0])) < 1e-6]
+    assert len(on_face) >= 3  # 0.8 m at most 0.25 m apart
+
+
 @pytest.mark.parametrize("pitch, roll", [(0.0, 0.0), (4.0, 0.0), (-3.0, 3.0)])
 def test_the_pipeline_measures_the_range_of_a_rendered_box(pitch, roll):
     scene, cam = sample_scene()

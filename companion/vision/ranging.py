@@ -199,8 +199,9 @@ def _cross(a, b) -> tuple[float, float, float]:
 def hidden_extent(corners_px: np.ndarray, contacts: Sequence[FloorContact], ovps: np.ndarray,
                   v3: np.ndarray, focal_px: float, centre: np.ndarray, camera_height_m: float,
                   depth_m: float, step_m: float = 0.25) -> list[tuple[float, float]]:
-    """Floor points an obstacle is taken to cover behind its feet, each (m ahead of the
-    camera, m to its right): what one view cannot measure.
+    """Floor points an obstacle is taken to cover beyond its measured feet, each (m ahead
+    of the camera, m to its right): what one view cannot measure, and the foot of a face
+    seen up to a corner whose own foot is not measured.
 
     An obstacle's faces run from each foot along its two horizontal axes (the OVPs
     ``ovps[0]``, ``ovps[1]``, homogeneous pixels); a face turned away from the camera is
@@ -208,9 +209,12 @@ def hidden_extent(corners_px: np.ndarray, contacts: Sequence[FloorContact], ovps
     (``contacts``: the obstacle's :func:`floor_contacts`, which name the top of each foot's
     edge), along each axis in the direction that leads away from the camera, the floor is
     sampled at most ``step_m`` apart for ``depth_m``, or as far as the last corner seen on
-    that face (the foot of its vertical line, through V3) if that is farther; an axis along
-    which a corner of the obstacle is seen on the near side of the foot is skipped, since
-    that face is seen to end at the foot. ``corners_px`` K×2, ``v3`` homogeneous,
+    that face (the foot of its vertical line, through V3) if that is farther. Along an axis
+    on which a corner of the obstacle is seen on the near side of the foot, that face is
+    seen to end at the foot and to run back from it: the floor is sampled from the foot to
+    the farthest such corner instead (the face seen, whose other foot may be hidden or
+    below the view, so that :func:`foot_line` has no second foot to reach; where it has,
+    the two sample the same line). ``corners_px`` K×2, ``v3`` homogeneous,
     ``focal_px``, ``centre`` the camera, ``camera_height_m`` above the floor. Not in the
     paper: the resume rule (:mod:`companion.control.supervisor`) keeps clear of these as of
     the feet themselves. Scalar arithmetic, as :func:`floor_contacts`: it runs for every
@@ -255,8 +259,10 @@ def hidden_extent(corners_px: np.ndarray, contacts: Sequence[FloorContact], ovps
             along = [(g.ahead_right_m[0] - fa) * a + (g.ahead_right_m[1] - fr) * b
                      for g in floor_points(np.array(meets).reshape(-1, 2), down, focal_px,
                                            centre, camera_height_m) if g is not None]
-            if any(t < -step_m for t in along):
-                continue  # a corner on the near side: the face seen ends at this foot
+            near = min(along, default=0.0)
+            if near < -step_m:  # a corner on the near side: the face seen, back to it
+                out += _between((fa, fr), (fa + a * near, fr + b * near), step_m)
+                continue
             reach = max([depth_m, *along])
             out += _between((fa, fr), (fa + a * reach, fr + b * reach), step_m)
     return out
