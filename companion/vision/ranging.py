@@ -259,11 +259,10 @@ def hidden_extent(corners_px: np.ndarray, contacts: Sequence[FloorContact], ovps
             along = [(g.ahead_right_m[0] - fa) * a + (g.ahead_right_m[1] - fr) * b
                      for g in floor_points(np.array(meets).reshape(-1, 2), down, focal_px,
                                            centre, camera_height_m) if g is not None]
+            # A corner on the near side: the face seen ends at this foot, back to it; else
+            # the floor behind, depth_m deep or to the farthest corner seen on the face.
             near = min(along, default=0.0)
-            if near < -step_m:  # a corner on the near side: the face seen, back to it
-                out += _between((fa, fr), (fa + a * near, fr + b * near), step_m)
-                continue
-            reach = max([depth_m, *along])
+            reach = near if near < -step_m else max([depth_m, *along])
             out += _between((fa, fr), (fa + a * reach, fr + b * reach), step_m)
     return out
 
