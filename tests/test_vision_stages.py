@@ -1262,6 +1262,62 @@ def test_a_face_whose_bottom_edge_is_a_room_edge_is_no_table():
     assert found(np.vstack([segs, bottom]), np.append(labels, V1)) == []
 
 
+def _tall_face_from_below(yaw_deg=15.0, fade_m=0.0, over_m=0.0, split_at=None, top_m=0.6):
+    """A box taller than a level camera, 2.5 m ahead, ``yaw_deg`` off the view, its near
+    face (1.4 m wide) seen nearly from the front: the face's top edge ``top_m`` above the
+    camera and its two outline edges down to the floor, 1.2 m below it. Each outline
+    edge is found from ``fade_m`` below the top (where a ceiling shaded like the face
+    hides it) down, or reaching ``over_m`` above it; the top edge is found in two pieces
+    with a 5 px gap at ``split_at`` of its length, or whole. Returns the segments (the
+    top's pieces first) and the face's direction and the receding one's on the floor."""
+    a = np.radians(yaw_deg)
+    u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
+    left = np.array([-0.7, -top_m, 2.5])
+    down = np.array([0.0, 1.0, 0.0])
+    top = _project([left, left + 1.4 * u])
+    if split_at is None:
+        segs = [[*top[0], *top[1]]]
+    else:
+        cut = top[0] + split_at * (top[1] - top[0])
+        step = 2.5 * (top[1] - top[0]) / np.linalg.norm(top[1] - top[0])
+        segs = [[*top[0], *(cut - step)], [*(cut + step), *top[1]]]
+    for corner in (left, left + 1.4 * u):
+        segs.append([*_project([corner + (fade_m - over_m) * down])[0],
+                     *_project([corner + (top_m + 1.2) * down])[0]])
+    return np.array(segs), u, v
+
+
+def test_a_tall_face_seen_from_below_its_top_hangs_its_outline_edges_from_it():
+    # A box taller than the camera, seen nearly front-on: its near face's top edge is above
+    # the horizon and no corner forms at its top (the receding faces are edge-on, the top
+    # face out of sight). Its outline edges hang from the top edge as a table's legs do.
+    # Against a ceiling shaded like the face they fade before the top, and the top edge
+    # breaks where the ceiling's shading crosses the face's: still one face.
+    from companion.vision.obstacles import find_obstacles
+
+    def found(segs):
+        labels = np.array([NONE] * (len(segs) - 2) + [V3, V3])
+        return find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                              labels)
+
+    for kw in ({}, {"fade_m": 0.15}, {"split_at": 0.2}, {"fade_m": 0.1, "split_at": 0.8}):
+        segs, u, v = _tall_face_from_below(**kw)
+        obstacles = found(segs)
+        assert len(obstacles) == 1 and obstacles[0].rule == "hanging face", kw
+        dirs = direction_of(obstacles[0].ovps[:2], F, C)
+        for face in (u, v):
+            assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5, kw
+    # An edge that stops short of the top by more than a corner's leg may is not under it,
+    # nor one that runs on above it (something standing behind the edge).
+    segs, _, _ = _tall_face_from_below(fade_m=0.6)
+    assert np.ptp(segs[1:, [1, 3]]) > 0  # the edges are found, from 0.6 m below the top
+    assert found(segs) == []
+    assert found(_tall_face_from_below(over_m=0.1)[0]) == []
+    # A top just above the horizon (0.15 m above the camera, 19 px) crosses it anywhere a
+    # pixel of noise puts it (8.6° for 1 px at either end, against 2.1° at 0.6 m): no reading.
+    assert found(_tall_face_from_below(top_m=0.15)[0]) == []
+
+
 def test_a_top_seen_front_on_takes_its_yaw_from_its_receding_edges():
     # A box's top seen from above nearly front-on (10° off the view, 0.45 m below the
     # camera): its front edge crosses the horizon far out, so a pixel of error at one end

@@ -233,33 +233,38 @@ cdef inline double right_angle_departure_deg(Frame* fr, double x1, double y1, do
     return signed_departure_deg(d, other)
 
 
+cdef double crossing_noise_sq(Frame* fr, Params* p, double[:, ::1] s, Py_ssize_t k,
+                              const double* other) noexcept nogil:
+    """How far ``noise_px`` at each end of leg ``k`` (across the leg) moves the departure
+    of its horizon crossing from a right angle to ``other``: the sum over its two ends of
+    the squared change, degrees² (first order, by finite differences; INF for a leg of no
+    length). A leg nearly along the horizon crosses it far away, where a pixel moves the
+    crossing by degrees."""
+    cdef double var = 0.0, e, nx, ny, ln, base
+    cdef double q[4]
+    cdef Py_ssize_t end
+    nx, ny = s[k, 1] - s[k, 3], s[k, 2] - s[k, 0]
+    ln = hypot(nx, ny)
+    if ln <= 0:
+        return INF
+    nx, ny = nx / ln * p.noise_px, ny / ln * p.noise_px
+    base = right_angle_departure_deg(fr, s[k, 0], s[k, 1], s[k, 2], s[k, 3], other)
+    for end in range(2):
+        q[0], q[1], q[2], q[3] = s[k, 0], s[k, 1], s[k, 2], s[k, 3]
+        q[2 * end] += nx
+        q[2 * end + 1] += ny
+        e = right_angle_departure_deg(fr, q[0], q[1], q[2], q[3], other) - base
+        var += e * e
+    return var
+
+
 cdef double right_angle_noise_deg(Frame* fr, Params* p, double[:, ::1] s, Py_ssize_t a,
                                   Py_ssize_t b, const double* d1,
                                   const double* d2) noexcept nogil:
     """How far ``noise_px`` at one end of leg ``a`` or ``b`` (across the leg) moves the
     right angle between their horizon crossings ``d1``, ``d2``: the root sum of squares over
-    the four ends, degrees (first order, by finite differences). A leg nearly along the
-    horizon crosses it far away, where a pixel moves the crossing by degrees."""
-    cdef double var = 0.0, e, nx, ny, ln
-    # The departure of the legs as they are, the same for either leg.
-    cdef double base = signed_departure_deg(d1, d2)
-    cdef double q[4]
-    cdef const double* other
-    cdef Py_ssize_t leg, end, k
-    for leg in range(2):
-        k, other = (a, d2) if leg == 0 else (b, d1)
-        nx, ny = s[k, 1] - s[k, 3], s[k, 2] - s[k, 0]
-        ln = hypot(nx, ny)
-        if ln <= 0:
-            return INF
-        nx, ny = nx / ln * p.noise_px, ny / ln * p.noise_px
-        for end in range(2):
-            q[0], q[1], q[2], q[3] = s[k, 0], s[k, 1], s[k, 2], s[k, 3]
-            q[2 * end] += nx
-            q[2 * end + 1] += ny
-            e = right_angle_departure_deg(fr, q[0], q[1], q[2], q[3], other) - base
-            var += e * e
-    return sqrt(var)
+    the four ends, degrees (:func:`crossing_noise_sq`)."""
+    return sqrt(crossing_noise_sq(fr, p, s, a, d2) + crossing_noise_sq(fr, p, s, b, d1))
 
 
 cdef bint horizon_ovps(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
@@ -413,10 +418,13 @@ cdef bint partner_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t le
     return found
 
 
-cdef list vertical_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
-                          Py_ssize_t[::1] verticals, Params* p):
-    """Vertical edges: V3 segments joined with collinear ones (λ1, eq. 6) across small
-    gaps. Returns a list of (x_a, y_a, x_b, y_b, length), the two extreme endpoints."""
+cdef list edge_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
+                      Py_ssize_t[::1] verticals, Params* p):
+    """Edges: the segments ``verticals`` (V3's, or the free legs) joined with collinear
+    ones among them (λ1, eq. 6) across small gaps, as the detector breaks one edge where
+    its background changes. Returns a list of (x_a, y_a, x_b, y_b, length, base), the two
+    extreme endpoints, which lie on the line of ``base``, the longest member (whose
+    direction is the most accurate)."""
     cdef Py_ssize_t nv = verticals.shape[0], i, j, e, k, vi, vj, m, base
     chains = []
     if nv == 0:
@@ -448,7 +456,7 @@ cdef list vertical_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] 
         vi = verticals[i]
         if members_count[i] == 1:  # most vertical segments: the chain is the segment itself
             if lengths[vi] >= 2 * p.min_edge_px:
-                chains.append((s[vi, 0], s[vi, 1], s[vi, 2], s[vi, 3], lengths[vi]))
+                chains.append((s[vi, 0], s[vi, 1], s[vi, 2], s[vi, 3], lengths[vi], vi))
             continue
         # One chain per distinct set of collinear members, grown from its first segment.
         duplicate = False
@@ -488,7 +496,8 @@ cdef list vertical_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] 
             if a <= hi + gap and b >= lo - gap:
                 lo, hi = min(lo, a), max(hi, b)
         if hi - lo >= 2 * p.min_edge_px:
-            chains.append((ox + lo * axx, oy + lo * axy, ox + hi * axx, oy + hi * axy, hi - lo))
+            chains.append((ox + lo * axx, oy + lo * axy, ox + hi * axx, oy + hi * axy, hi - lo,
+                           base))
     return chains
 
 
@@ -509,7 +518,7 @@ cdef list edge_legs(Frame* fr, double[:, ::1] s, double[::1] lengths, list chain
     """Vertical edges with the non-Manhattan legs that end at each of their two ends.
 
     Returns a list of (chain, legs_a, legs_b) with ``chain`` one of ``chains``
-    (:func:`vertical_chains`), or that chain grown at its foot (below); a leg is (segment
+    (:func:`edge_chains`), or that chain grown at its foot (below); a leg is (segment
     index, side): the side (±1) of the edge it leaves toward. Legs are at least 20° off
     the edge (:func:`leaves_end`).
 
@@ -524,7 +533,7 @@ cdef list edge_legs(Frame* fr, double[:, ::1] s, double[::1] lengths, list chain
     cdef double ex, ey, axx, axy, side, ox, oy, t, reach
     cdef Py_ssize_t j, f, end, q
     for chain in chains:
-        xa, ya, xb, yb, length = chain
+        xa, ya, xb, yb, length, base = chain
         axx, axy = (xb - xa) / length, (yb - ya) / length
         ends = [(xa, ya), (xb, yb)]
         legs = ([], [])
@@ -553,7 +562,7 @@ cdef list edge_legs(Frame* fr, double[:, ::1] s, double[::1] lengths, list chain
                 ex, ey = ex + reach * ox, ey + reach * oy
                 ends[end] = (ex, ey)
                 attached_legs(s, lengths, free_idx, ex, ey, axx, axy, p, legs[end])
-                chain = (ends[0][0], ends[0][1], ends[1][0], ends[1][1], length + reach)
+                chain = (ends[0][0], ends[0][1], ends[1][0], ends[1][1], length + reach, base)
         if legs[0] or legs[1]:
             out.append((chain, legs[0], legs[1]))
     return out
@@ -1374,20 +1383,21 @@ cdef bint room_edge_under(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1]
     return False
 
 
-cdef void receding_top_legs(Frame* fr, Params* p, double[:, ::1] s, Py_ssize_t a,
+cdef void receding_top_legs(Frame* fr, Params* p, double[:, ::1] s, tuple top,
                             const double* o, Py_ssize_t[::1] free_idx,
                             Hypothesis* h) noexcept:
     """Add to ``h.legs`` (up to its four) the free segments that leave an end of the top
-    edge ``a`` (within ``radius_px``) at ``MIN_SIDE`` or more from it (``o``: its OVP),
-    toward the horizon and ending below it: the top's receding edges, seen from above."""
+    edge ``top`` (an :func:`edge_chains` chain; within ``radius_px``) at ``MIN_SIDE`` or
+    more from it (``o``: its OVP), toward the horizon and ending below it: the top's
+    receding edges, seen from above."""
     cdef Py_ssize_t j, b, e, k
     cdef double ex, ey
     for j in range(free_idx.shape[0]):
         b = free_idx[j]
-        if b == a or h.nlegs >= 4 or vp_sin(s[b, 0], s[b, 1], s[b, 2], s[b, 3], o) <= MIN_SIDE:
+        if h.nlegs >= 4 or vp_sin(s[b, 0], s[b, 1], s[b, 2], s[b, 3], o) <= MIN_SIDE:
             continue
         for e in range(2):
-            ex, ey = s[a, 2 * e], s[a, 2 * e + 1]
+            ex, ey = top[2 * e], top[2 * e + 1]
             if end_distance(s, b, ex, ey) > p.radius_px:
                 continue
             k = 2 if hypot(s[b, 0] - ex, s[b, 1] - ey) < hypot(s[b, 2] - ex, s[b, 3] - ey) else 0
@@ -1401,51 +1411,74 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
                         double[::1] lengths, Py_ssize_t[::1] free_idx, list chains,
                         Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
     """One face's top edge with vertical edges hanging from it: a table's top seen from
-    the front with its legs under the top's front edge, or a box whose receding edges are
-    too foreshortened to show. The top edge is horizontal, so its OVP is where it crosses
-    the horizon; the other face's OVP is at a right angle to it through the focal length,
-    as in :func:`single_halves`, whose test of V1 ⟂ V2 applies.
+    the front with its legs under the top's front edge, a box whose receding edges are
+    too foreshortened to show, or a box taller than the camera seen from below its top.
+    The top edge is horizontal, so its OVP is where it crosses the horizon; the other
+    face's OVP is at a right angle to it through the focal length, as in
+    :func:`single_halves`, whose test of V1 ⟂ V2 applies.
 
-    The top edge is a free leg ``5 min_edge_px`` long or more (shorter ones fix their
-    direction too poorly), below the horizon (a top seen from above), its OVP away from V1
-    and V2. A vertical edge hangs from it when its upper end is within ``radius_px`` of
-    its line and between its ends; two or more must, one on each side of its middle (the
-    legs of one top, not one edge twice). No room edge may join two of their feet
-    (:func:`room_edge_under`). Where the top's receding edges show at its ends
-    (:func:`receding_top_legs`), both OVPs are fitted to them and the top edge as one
-    box's yaw (:func:`box_ovps_fit`), which the receding edges fix well where the top
-    edge's far crossing does not."""
+    The top edge is a chain of collinear free legs (:func:`edge_chains`: the detector
+    breaks an edge where its background changes), whose longest member, which gives its
+    line, is ``5 min_edge_px`` long or more (shorter ones fix their direction too poorly),
+    its OVP away from V1 and V2. A vertical edge hangs from it when its upper end lies
+    between the top's ends and within ``radius_px`` of its line; two or more must, one on
+    each side of the top's middle (the legs of one top, not one edge twice). No room edge
+    may join two of their feet (:func:`room_edge_under`).
+
+    A top above the horizon is a face's seen from below, its only sign of the face's yaw
+    (the receding faces edge-on, the top face out of sight): ``noise_px`` at its ends may
+    move its OVP by at most ``single_face_tol_deg`` (:func:`crossing_noise_sq`; near the
+    horizon, as an aligned cabinet's top seen at eye level, the crossing is anywhere). Its
+    outline edges may stop short of it, below, by as much as a corner's vertical leg may
+    (``radius_px + leg_gap_frac`` of the edge's length): against a ceiling shaded like the
+    face, an edge fades before it reaches the top. Where
+    the top's receding edges show at its ends (:func:`receding_top_legs`, only from
+    above), both OVPs are fitted to them and the top edge as one box's yaw
+    (:func:`box_ovps_fit`), which the receding edges fix well where the top edge's far
+    crossing does not."""
     cdef double o[3]
     cdef double d1[3]
     cdef double d2[3]
-    cdef double ux, uy, length, t, off, lo, hi, tallest
+    cdef double ux, uy, t, t0, t1, middle, off, lo, hi, tallest, side, gap
+    cdef bint from_below
     cdef double o1[3]
     cdef double o2[3]
-    cdef Py_ssize_t i, a, k
+    cdef Py_ssize_t a, k
     cdef Hypothesis* h
     if not chains or not room_vouches_for_focal(fr, p):
         return
-    for i in range(free_idx.shape[0]):
-        a = free_idx[i]
-        length = lengths[a]
-        if length < 5 * p.min_edge_px:
-            continue
-        if below_horizon(fr, (s[a, 0] + s[a, 2]) / 2, (s[a, 1] + s[a, 3]) / 2) <= 0:
+    for top in edge_chains(s, lengths, lines, free_idx, p):
+        a = top[5]
+        if lengths[a] < 5 * p.min_edge_px:
             continue
         if not intersect(&lines[a, 0], fr.horizon, o):
             continue
         direction_of(fr, o, d1)
         if not off_layout(fr, p, d1):
             continue
-        ux, uy = (s[a, 2] - s[a, 0]) / length, (s[a, 3] - s[a, 1]) / length
+        cross3(fr.d3, d1, d2)
+        if unit3(d2) <= 0:
+            continue
+        from_below = below_horizon(fr, (s[a, 0] + s[a, 2]) / 2, (s[a, 1] + s[a, 3]) / 2) <= 0
+        if from_below and sqrt(crossing_noise_sq(fr, p, s, a, d2)) > p.single_face_tol_deg:
+            continue
+        ux, uy = (s[a, 2] - s[a, 0]) / lengths[a], (s[a, 3] - s[a, 1]) / lengths[a]
+        t0 = (top[0] - s[a, 0]) * ux + (top[1] - s[a, 1]) * uy
+        t1 = (top[2] - s[a, 0]) * ux + (top[3] - s[a, 1]) * uy
+        t0, t1 = min(t0, t1), max(t0, t1)
+        middle = (t0 + t1) / 2
         lo, hi, tallest = INF, -INF, 0.0
         feet = []
         for chain in chains:
             k = 0 if below_horizon(fr, chain[0], chain[1]) < below_horizon(
                 fr, chain[2], chain[3]) else 2  # the upper end
-            off = fabs(lines[a, 0] * chain[k] + lines[a, 1] * chain[k + 1] + lines[a, 2])
+            off = lines[a, 0] * chain[k] + lines[a, 1] * chain[k + 1] + lines[a, 2]
+            gap = p.radius_px
+            if from_below:  # an upper end on the foot's side of the top's line stops short
+                side = lines[a, 0] * chain[2 - k] + lines[a, 1] * chain[3 - k] + lines[a, 2]
+                gap += p.leg_gap_frac * chain[4] if off * side > 0 else 0.0
             t = (chain[k] - s[a, 0]) * ux + (chain[k + 1] - s[a, 1]) * uy
-            if off > p.radius_px or t < -p.radius_px or t > length + p.radius_px:
+            if fabs(off) > gap or t < t0 - p.radius_px or t > t1 + p.radius_px:
                 continue
             feet.append((chain[2 - k], chain[3 - k]))
             if t < lo:
@@ -1453,18 +1486,15 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
             if t > hi:
                 hi, top_hi = t, (chain[k], chain[k + 1])
             tallest = max(tallest, chain[4])
-        if len(feet) < 2 or lo > length / 2 or hi < length / 2:
+        if len(feet) < 2 or lo > middle or hi < middle:
             continue
         if room_edge_under(s, lengths, room_idx, feet, p.radius_px):
-            continue
-        cross3(fr.d3, d1, d2)
-        if unit3(d2) <= 0:
             continue
         h = new_hypothesis(found, HANGING_FACE)
         set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
         h.legs[0] = a
         h.nlegs = 1
-        receding_top_legs(fr, p, s, a, o, free_idx, h)
+        receding_top_legs(fr, p, s, top, o, free_idx, h)
         if h.nlegs > 1:
             # The top edge's far crossing fixes the other OVP poorly when the face is seen
             # nearly front-on (about 4° of bearing per pixel in the closed loop's room):
@@ -1604,7 +1634,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         junctions = leg_junctions(s, lines, lengths, free_idx, min_leg_sin, &p)
         junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
-        chains = vertical_chains(s, lengths, lines, verticals, &p)
+        chains = edge_chains(s, lengths, lines, verticals, &p)
         edges = edge_legs(&fr, s, lengths, chains, free_idx, room_idx, &p)
         silhouette_halves(&fr, &p, s, lengths, lines, edges, manhattan_idx, &halves)
         pair_halves(&fr, &p, s, lines, &halves, &found)

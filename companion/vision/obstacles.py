@@ -60,7 +60,8 @@ class ObstacleParams:
     shadow's), and chance passes it as readily as a box does"""
     single_face_tol_deg: float = 3.0  # when one face is all there is of a box: its OVP this
     # close to horizontal, and the room's V1 ⟂ V2 this close (its other OVP is at a right
-    # angle through the focal length)
+    # angle through the focal length); a face seen from below its top: ``noise_px`` at the
+    # top's ends moves its OVP by at most this
     non_manhattan_min_deg: float = 5.0  # OVPs at least this far from V1 and V2
     merge_deg: float = 3.0  # pairs whose OVPs agree this well are one obstacle
     member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well
