@@ -1431,8 +1431,9 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
     horizon, as an aligned cabinet's top seen at eye level, the crossing is anywhere). Its
     outline edges may stop short of it, below, by as much as a corner's vertical leg may
     (``radius_px + leg_gap_frac`` of the edge's length): against a ceiling shaded like the
-    face, an edge fades before it reaches the top. Where
-    the top's receding edges show at its ends (:func:`receding_top_legs`, only from
+    face, an edge fades before it reaches the top.
+
+    Where the top's receding edges show at its ends (:func:`receding_top_legs`, only from
     above), both OVPs are fitted to them and the top edge as one box's yaw
     (:func:`box_ovps_fit`), which the receding edges fix well where the top edge's far
     crossing does not."""
