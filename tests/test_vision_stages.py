@@ -1262,19 +1262,24 @@ def test_a_face_whose_bottom_edge_is_a_room_edge_is_no_table():
     assert found(np.vstack([segs, bottom]), np.append(labels, V1)) == []
 
 
-def _tall_face_from_below(yaw_deg=15.0, fade_m=0.0, over_m=0.0, split_at=None, top_m=0.6):
+def _tall_face_from_below(yaw_deg=15.0, fade_m=0.0, over_m=0.0, split_at=None, top_m=0.6,
+                          foot=False, foot_fade_m=0.0, foot_over_m=0.0):
     """A box taller than a level camera, 2.5 m ahead, ``yaw_deg`` off the view, its near
     face (1.4 m wide) seen nearly from the front: the face's top edge ``top_m`` above the
     camera and its two outline edges down to the floor, 1.2 m below it. Each outline
     edge is found from ``fade_m`` below the top (where a ceiling shaded like the face
     hides it) down, or reaching ``over_m`` above it; the top edge is found in two pieces
-    with a 5 px gap at ``split_at`` of its length, or whole. Returns the segments (the
-    top's pieces first) and the face's direction and the receding one's on the floor."""
+    with a 5 px gap at ``split_at`` of its length, or whole. With ``foot`` the face's foot
+    on the floor is found instead of its top, and each outline edge from ``foot_fade_m``
+    above the foot (or ``foot_over_m`` below it) up to the top. Returns the segments (the
+    top's or foot's pieces first) and the face's direction and the receding one's on the
+    floor."""
     a = np.radians(yaw_deg)
     u, v = np.array([np.cos(a), 0.0, np.sin(a)]), np.array([-np.sin(a), 0.0, np.cos(a)])
     left = np.array([-0.7, -top_m, 2.5])
     down = np.array([0.0, 1.0, 0.0])
-    top = _project([left, left + 1.4 * u])
+    level = left + foot * (top_m + 1.2) * down  # the top's left end, or the foot's
+    top = _project([level, level + 1.4 * u])
     if split_at is None:
         segs = [[*top[0], *top[1]]]
     else:
@@ -1283,7 +1288,7 @@ def _tall_face_from_below(yaw_deg=15.0, fade_m=0.0, over_m=0.0, split_at=None, t
         segs = [[*top[0], *(cut - step)], [*(cut + step), *top[1]]]
     for corner in (left, left + 1.4 * u):
         segs.append([*_project([corner + (fade_m - over_m) * down])[0],
-                     *_project([corner + (top_m + 1.2) * down])[0]])
+                     *_project([corner + (top_m + 1.2 - foot_fade_m + foot_over_m) * down])[0]])
     return np.array(segs), u, v
 
 
@@ -1316,6 +1321,35 @@ def test_a_tall_face_seen_from_below_its_top_hangs_its_outline_edges_from_it():
     # A top just above the horizon (0.15 m above the camera, 19 px) crosses it anywhere a
     # pixel of noise puts it (8.6° for 1 px at either end, against 2.1° at 0.6 m): no reading.
     assert found(_tall_face_from_below(top_m=0.15)[0]) == []
+
+
+def test_a_tall_face_whose_top_does_not_show_stands_its_outline_edges_on_its_foot():
+    # The same face with its top edge lost against the ceiling: its foot on the floor is
+    # a horizontal edge of the face as well, its outline edges standing on it. The edges
+    # may fade short of the foot (a contact shadow) as of the top; where they meet the
+    # foot's line is the face's floor contact, which ranges it.
+    from companion.vision.obstacles import find_obstacles
+    from companion.vision.ranging import obstacle_contact
+
+    def found(segs):
+        labels = np.array([NONE] * (len(segs) - 2) + [V3, V3])
+        return find_obstacles(segs, find_corners(segs, labels), _room_layout(), labels == NONE,
+                              labels)
+
+    for kw in ({}, {"foot_fade_m": 0.15}, {"split_at": 0.3}, {"fade_m": 0.3}):
+        segs, u, v = _tall_face_from_below(foot=True, **kw)
+        obstacles = found(segs)
+        assert len(obstacles) == 1 and obstacles[0].rule == "standing face", kw
+        dirs = direction_of(obstacles[0].ovps[:2], F, C)
+        for face in (u, v):
+            assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5, kw
+        # the floor 1.2 m below the camera, the foot's left end 2.5 m ahead and 0.7 m left
+        contact = obstacle_contact(obstacles[0].corners_px, obstacles[0].ovps[2], F, C, 1.2)
+        assert contact is not None and abs(contact.range_m - np.hypot(0.7, 2.5)) < 0.05, kw
+    # Edges that stop short of the foot by more than a leg may, or run on below it (what
+    # stands behind the foot's line), do not stand on it.
+    assert found(_tall_face_from_below(foot=True, foot_fade_m=0.6)[0]) == []
+    assert found(_tall_face_from_below(foot=True, foot_over_m=0.1)[0]) == []
 
 
 def test_a_top_seen_front_on_takes_its_yaw_from_its_receding_edges():

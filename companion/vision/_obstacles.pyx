@@ -31,9 +31,9 @@ cdef double MIN_SIDE = sin(radians(20.0))  # a leg leaves its vertical edge at 2
 # rule read each detection and each false alarm).
 cdef enum:
     CORNER_PAIR, SINGLE_CORNER, LEG_JUNCTIONS, TWO_FACES, EDGE_LEGS, HIDDEN_EDGE, ONE_FACE, \
-        HANGING_FACE
+        HANGING_FACE, STANDING_FACE
 RULES = ("corner pair", "single corner", "leg junctions", "two faces", "edge legs",
-         "hidden edge", "one face", "hanging face")
+         "hidden edge", "one face", "hanging face", "standing face")
 
 
 cdef struct Params:
@@ -1412,40 +1412,33 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
                         Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
     """One face's top edge with vertical edges hanging from it: a table's top seen from
     the front with its legs under the top's front edge, a box whose receding edges are
-    too foreshortened to show, or a box taller than the camera seen from below its top.
-    The top edge is horizontal, so its OVP is where it crosses the horizon; the other
-    face's OVP is at a right angle to it through the focal length, as in
-    :func:`single_halves`, whose test of V1 ⟂ V2 applies.
+    too foreshortened to show, or a box taller than the camera seen from below its top;
+    or a face's foot with its outline edges standing on it, where its top does not show
+    (:func:`face_outline` makes each). The face's edge is horizontal, so its OVP is where
+    it crosses the horizon; the other face's OVP is at a right angle to it through the
+    focal length, as in :func:`single_halves`, whose test of V1 ⟂ V2 applies.
 
-    The top edge is a chain of collinear free legs (:func:`edge_chains`: the detector
+    The face's edge is a chain of collinear free legs (:func:`edge_chains`: the detector
     breaks an edge where its background changes), whose longest member, which gives its
     line, is ``5 min_edge_px`` long or more (shorter ones fix their direction too poorly),
-    its OVP away from V1 and V2. A vertical edge hangs from it when its upper end lies
-    between the top's ends and within ``radius_px`` of its line; two or more must, one on
-    each side of the top's middle (the legs of one top, not one edge twice). No room edge
-    may join two of their feet (:func:`room_edge_under`).
+    its OVP away from V1 and V2.
 
     A top above the horizon is a face's seen from below, its only sign of the face's yaw
-    (the receding faces edge-on, the top face out of sight): ``noise_px`` at its ends may
-    move its OVP by at most ``single_face_tol_deg`` (:func:`crossing_noise_sq`; near the
-    horizon, as an aligned cabinet's top seen at eye level, the crossing is anywhere). Its
-    outline edges may stop short of it, below, by as much as a corner's vertical leg may
-    (``radius_px + leg_gap_frac`` of the edge's length): against a ceiling shaded like the
-    face, an edge fades before it reaches the top.
+    (the receding faces edge-on, the top face out of sight), and a foot is seen from
+    above with its receding edges hidden behind the face: ``noise_px`` at their ends may
+    move their OVP by at most ``single_face_tol_deg`` (:func:`crossing_noise_sq`; near the
+    horizon, as an aligned cabinet's top seen at eye level, the crossing is anywhere).
 
-    Where the top's receding edges show at its ends (:func:`receding_top_legs`, only from
+    Where a top's receding edges show at its ends (:func:`receding_top_legs`, only from
     above), both OVPs are fitted to them and the top edge as one box's yaw
     (:func:`box_ovps_fit`), which the receding edges fix well where the top edge's far
     crossing does not."""
     cdef double o[3]
     cdef double d1[3]
     cdef double d2[3]
-    cdef double ux, uy, t, t0, t1, middle, off, lo, hi, tallest, side, gap
-    cdef bint from_below
-    cdef double o1[3]
-    cdef double o2[3]
-    cdef Py_ssize_t a, k
-    cdef Hypothesis* h
+    cdef double mid
+    cdef bint noisy
+    cdef Py_ssize_t a
     if not chains or not room_vouches_for_focal(fr, p):
         return
     for top in edge_chains(s, lengths, lines, free_idx, p):
@@ -1460,56 +1453,118 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
         cross3(fr.d3, d1, d2)
         if unit3(d2) <= 0:
             continue
-        from_below = below_horizon(fr, (s[a, 0] + s[a, 2]) / 2, (s[a, 1] + s[a, 3]) / 2) <= 0
-        if from_below and sqrt(crossing_noise_sq(fr, p, s, a, d2)) > p.single_face_tol_deg:
-            continue
-        ux, uy = (s[a, 2] - s[a, 0]) / lengths[a], (s[a, 3] - s[a, 1]) / lengths[a]
-        t0 = (top[0] - s[a, 0]) * ux + (top[1] - s[a, 1]) * uy
-        t1 = (top[2] - s[a, 0]) * ux + (top[3] - s[a, 1]) * uy
-        t0, t1 = min(t0, t1), max(t0, t1)
-        middle = (t0 + t1) / 2
-        lo, hi, tallest = INF, -INF, 0.0
-        feet = []
-        for chain in chains:
-            k = 0 if below_horizon(fr, chain[0], chain[1]) < below_horizon(
-                fr, chain[2], chain[3]) else 2  # the upper end
-            off = lines[a, 0] * chain[k] + lines[a, 1] * chain[k + 1] + lines[a, 2]
-            gap = p.radius_px
-            if from_below:  # an upper end on the foot's side of the top's line stops short
-                side = lines[a, 0] * chain[2 - k] + lines[a, 1] * chain[3 - k] + lines[a, 2]
-                gap += p.leg_gap_frac * chain[4] if off * side > 0 else 0.0
-            t = (chain[k] - s[a, 0]) * ux + (chain[k + 1] - s[a, 1]) * uy
-            if fabs(off) > gap or t < t0 - p.radius_px or t > t1 + p.radius_px:
+        mid = below_horizon(fr, (s[a, 0] + s[a, 2]) / 2, (s[a, 1] + s[a, 3]) / 2)
+        noisy = sqrt(crossing_noise_sq(fr, p, s, a, d2)) > p.single_face_tol_deg
+        for at_foot in range(2):
+            # A foot lies below the horizon; a top above it and a foot fix the face's yaw
+            # alone, so their OVP must stand pixel noise.
+            if at_foot and mid <= 0 or (at_foot or mid <= 0) and noisy:
                 continue
-            feet.append((chain[2 - k], chain[3 - k]))
-            if t < lo:
-                lo, top_lo = t, (chain[k], chain[k + 1])
-            if t > hi:
-                hi, top_hi = t, (chain[k], chain[k + 1])
-            tallest = max(tallest, chain[4])
-        if len(feet) < 2 or lo > middle or hi < middle:
+            face_outline(fr, p, s, lines, lengths, chains, room_idx, top, d1, d2, at_foot,
+                         mid <= 0 and not at_foot, free_idx, found)
+
+
+cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
+                       double[::1] lengths, list chains, Py_ssize_t[::1] room_idx, tuple edge,
+                       const double* d1, const double* d2, bint at_foot, bint from_below,
+                       Py_ssize_t[::1] free_idx, Hypotheses* found) except *:
+    """One hypothesis for :func:`hanging_faces`, appended to ``found``: a face from its
+    horizontal ``edge`` (an :func:`edge_chains` chain whose OVP is the direction ``d1``,
+    ``d2`` at a right angle to it) and the vertical edges ``chains`` whose upper ends
+    (``at_foot``: lower ends) lie on its line, between its ends: two or more, one on each
+    side of its middle (the edges of one face, not one edge twice), each upright (at
+    ``MIN_SIDE`` or more from the face's edge, pointing at V3 within ``member_angle_deg``).
+
+    An edge may stop short of the face's edge by ``radius_px``, and where it lies wholly
+    on one side (a top seen from below, or a foot: the edges fade against a ceiling, or a
+    contact shadow, shaded like the face) by ``leg_gap_frac`` of its length more, as a
+    corner's vertical leg may. A foot may stop short of the outermost edges as far as
+    :func:`edge_chains` joins pieces across, but not run on past them (something in front
+    of them); where each outer edge's line meets it is a floor contact. No room edge may
+    join two of the edges' other ends (:func:`room_edge_under`)."""
+    cdef double o[3]
+    cdef double o1[3]
+    cdef double o2[3]
+    cdef double e1[3]
+    cdef double e2[3]
+    cdef double ux, uy, t, t0, t1, middle, reach, off, lo, hi, tallest, side, gap
+    cdef Py_ssize_t a = edge[5], k, near, b
+    cdef Hypothesis* h
+    ux, uy = (s[a, 2] - s[a, 0]) / lengths[a], (s[a, 3] - s[a, 1]) / lengths[a]
+    t0 = (edge[0] - s[a, 0]) * ux + (edge[1] - s[a, 1]) * uy
+    t1 = (edge[2] - s[a, 0]) * ux + (edge[3] - s[a, 1]) * uy
+    t0, t1 = min(t0, t1), max(t0, t1)
+    middle = (t0 + t1) / 2
+    # A foot's ends reach as far as edge_chains joins a piece: the detector stops a foot
+    # short of the face's corner, in the shadow where face and floor meet.
+    reach = p.radius_px + (p.leg_gap_frac * (t1 - t0) if at_foot else 0.0)
+    cdef double v3[3]
+    cdef double max_lean = sin(radians(p.member_angle_deg))
+    pixel_point(fr.f, fr.cx, fr.cy, fr.d3, v3)
+    lo, hi, tallest = INF, -INF, 0.0
+    ends = []
+    cdef int upright = 0
+    for chain in chains:
+        # near: the chain's end on the face's edge (its upper end, or at a foot its lower)
+        near = 0 if below_horizon(fr, chain[0], chain[1]) < below_horizon(
+            fr, chain[2], chain[3]) else 2
+        if at_foot:
+            near = 2 - near
+        off = lines[a, 0] * chain[near] + lines[a, 1] * chain[near + 1] + lines[a, 2]
+        gap = p.radius_px
+        if from_below or at_foot:  # a near end on the chain's own side stops short
+            side = lines[a, 0] * chain[2 - near] + lines[a, 1] * chain[3 - near] + lines[a, 2]
+            gap += p.leg_gap_frac * chain[4] if off * side > 0 else 0.0
+        t = (chain[near] - s[a, 0]) * ux + (chain[near + 1] - s[a, 1]) * uy
+        if fabs(off) > gap or t < t0 - reach or t > t1 + reach:
             continue
-        if room_edge_under(s, lengths, room_idx, feet, p.radius_px):
+        ends.append((chain[2 - near], chain[3 - near]))
+        # Counted only if upright: not along the face's edge, and not a line on the floor
+        # aimed near V3 (a rug's stripe); the room-edge test below takes every one.
+        if (fabs((chain[2] - chain[0]) * uy - (chain[3] - chain[1]) * ux) < MIN_SIDE * chain[4]
+                or vp_sin(chain[0], chain[1], chain[2], chain[3], v3) > max_lean):
             continue
-        h = new_hypothesis(found, HANGING_FACE)
-        set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
-        h.legs[0] = a
-        h.nlegs = 1
-        receding_top_legs(fr, p, s, top, o, free_idx, h)
-        if h.nlegs > 1:
-            # The top edge's far crossing fixes the other OVP poorly when the face is seen
-            # nearly front-on (about 4° of bearing per pixel in the closed loop's room):
-            # both OVPs are fitted as one box's yaw to the top edge and the receding ones.
-            pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
-            if intersect(&lines[h.legs[1], 0], fr.horizon, o2) and box_ovps_fit(
-                    fr, s, lines, [h.legs[k] for k in range(h.nlegs)], sin(radians(3.0)),
-                    o1, o2):
-                direction_of(fr, o1, d1)
-                direction_of(fr, o2, d2)
-                set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
-        h.points[0], h.points[1] = top_lo
-        h.points[2], h.points[3] = top_hi
-        h.npoints = 2
+        if at_foot:  # where the edge's line meets the foot: the floor contact
+            b = chain[5]
+            if not intersect(&lines[b, 0], &lines[a, 0], o) or fabs(o[2]) < 1e-12:
+                continue
+            point = (chain[2 - near], chain[3 - near], o[0] / o[2], o[1] / o[2])
+        else:
+            point = (chain[near], chain[near + 1])
+        upright += 1
+        if t < lo:
+            lo, at_lo = t, point
+        if t > hi:
+            hi, at_hi = t, point
+        tallest = max(tallest, chain[4])
+    if upright < 2 or lo > middle or hi < middle:
+        return
+    if at_foot and (t0 < lo - reach or t1 > hi + reach):
+        return
+    if room_edge_under(s, lengths, room_idx, ends, p.radius_px):
+        return
+    h = new_hypothesis(found, STANDING_FACE if at_foot else HANGING_FACE)
+    set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
+    h.legs[0] = a
+    h.nlegs = 1
+    if not at_foot:
+        intersect(&lines[a, 0], fr.horizon, o)
+        receding_top_legs(fr, p, s, edge, o, free_idx, h)
+    if h.nlegs > 1:
+        # The top edge's far crossing fixes the other OVP poorly when the face is seen
+        # nearly front-on (about 4° of bearing per pixel in the closed loop's room):
+        # both OVPs are fitted as one box's yaw to the top edge and the receding ones.
+        pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+        if intersect(&lines[h.legs[1], 0], fr.horizon, o2) and box_ovps_fit(
+                fr, s, lines, [h.legs[k] for k in range(h.nlegs)], sin(radians(3.0)),
+                o1, o2):
+            direction_of(fr, o1, e1)
+            direction_of(fr, o2, e2)
+            set_ovps(h, e1, e2, horizon_error(fr, e1), tallest)
+    points = at_lo + at_hi  # (x, y) pairs: two tops, or two edges' upper ends and feet
+    h.npoints = len(points) // 2
+    for k in range(len(points)):
+        h.points[k] = points[k]
 
 
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,

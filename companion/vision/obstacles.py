@@ -60,11 +60,12 @@ class ObstacleParams:
     shadow's), and chance passes it as readily as a box does"""
     single_face_tol_deg: float = 3.0  # when one face is all there is of a box: its OVP this
     # close to horizontal, and the room's V1 ⟂ V2 this close (its other OVP is at a right
-    # angle through the focal length); a face seen from below its top: ``noise_px`` at the
-    # top's ends moves its OVP by at most this
+    # angle through the focal length); a face seen from below its top, or by its foot:
+    # ``noise_px`` at that edge's ends moves its OVP by at most this
     non_manhattan_min_deg: float = 5.0  # OVPs at least this far from V1 and V2
     merge_deg: float = 3.0  # pairs whose OVPs agree this well are one obstacle
-    member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well
+    member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well (and a
+    # face's outline edges at V3)
     refit_slack_deg: float = 2.0  # an OVP refit at most this farther from horizontal/orthogonal
     box_fit: bool = True  # OVPs fitted as one box's yaw about V3 (fit_box_ovps)
     hidden_edge_corners: bool = True  # two legs meeting where no vertical edge shows, one
@@ -150,7 +151,7 @@ def find_obstacles(
     missed leg of ``C_h`` replaced by the horizon), ``single corner`` (no leg of ``C_h``),
     ``leg junctions``, ``two faces`` (two vertical edges whose end legs meet on the
     horizon, at a right angle), ``edge legs`` (a leg at each end of one vertical edge),
-    ``hidden edge``, ``one face``, ``hanging face``.
+    ``hidden edge``, ``one face``, ``hanging face``, ``standing face``.
 
     Inputs: ``segments`` N×4 pixels; ``corners`` already filtered by Table I;
     ``layout`` the frame's layout VPs; ``free`` N bool, segments that may be obstacle
