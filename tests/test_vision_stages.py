@@ -1263,7 +1263,7 @@ def test_a_face_whose_bottom_edge_is_a_room_edge_is_no_table():
 
 
 def _tall_face_from_below(yaw_deg=15.0, fade_m=0.0, over_m=0.0, split_at=None, top_m=0.6,
-                          foot=False, foot_fade_m=0.0, foot_over_m=0.0):
+                          foot=False, foot_fade_m=0.0, foot_over_m=0.0, span_m=(0.0, 1.4)):
     """A box taller than a level camera, 2.5 m ahead, ``yaw_deg`` off the view, its near
     face (1.4 m wide) seen nearly from the front: the face's top edge ``top_m`` above the
     camera and its two outline edges down to the floor, 1.2 m below it. Each outline
@@ -1271,7 +1271,8 @@ def _tall_face_from_below(yaw_deg=15.0, fade_m=0.0, over_m=0.0, split_at=None, t
     hides it) down, or reaching ``over_m`` above it; the top edge is found in two pieces
     with a 5 px gap at ``split_at`` of its length, or whole. With ``foot`` the face's foot
     on the floor is found instead of its top, and each outline edge from ``foot_fade_m``
-    above the foot (or ``foot_over_m`` below it) up to the top. Returns the segments (the
+    above the foot (or ``foot_over_m`` below it) up to the top. The top or foot is found
+    from ``span_m[0]`` to ``span_m[1]`` metres along the face. Returns the segments (the
     top's or foot's pieces first) and the face's direction and the receding one's on the
     floor."""
     a = np.radians(yaw_deg)
@@ -1279,7 +1280,7 @@ def _tall_face_from_below(yaw_deg=15.0, fade_m=0.0, over_m=0.0, split_at=None, t
     left = np.array([-0.7, -top_m, 2.5])
     down = np.array([0.0, 1.0, 0.0])
     level = left + foot * (top_m + 1.2) * down  # the top's left end, or the foot's
-    top = _project([level, level + 1.4 * u])
+    top = _project([level + span_m[0] * u, level + span_m[1] * u])
     if split_at is None:
         segs = [[*top[0], *top[1]]]
     else:
@@ -1350,6 +1351,11 @@ def test_a_tall_face_whose_top_does_not_show_stands_its_outline_edges_on_its_foo
     # stands behind the foot's line), do not stand on it.
     assert found(_tall_face_from_below(foot=True, foot_fade_m=0.6)[0]) == []
     assert found(_tall_face_from_below(foot=True, foot_over_m=0.1)[0]) == []
+    # The foot may be found short of an outer edge (its corner in the contact shadow), but
+    # a line running on past the edges is something in front of them, not their foot.
+    short = found(_tall_face_from_below(foot=True, span_m=(0.0, 1.25))[0])
+    assert len(short) == 1 and short[0].rule == "standing face"
+    assert found(_tall_face_from_below(foot=True, span_m=(0.0, 2.0))[0]) == []
 
 
 def test_a_top_seen_front_on_takes_its_yaw_from_its_receding_edges():
