@@ -1437,7 +1437,7 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
     cdef double d1[3]
     cdef double d2[3]
     cdef double mid
-    cdef bint noisy
+    cdef bint noisy, alone
     cdef Py_ssize_t a
     if not chains or not room_vouches_for_focal(fr, p):
         return
@@ -1456,17 +1456,18 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
         mid = below_horizon(fr, (s[a, 0] + s[a, 2]) / 2, (s[a, 1] + s[a, 3]) / 2)
         noisy = sqrt(crossing_noise_sq(fr, p, s, a, d2)) > p.single_face_tol_deg
         for at_foot in range(2):
-            # A foot lies below the horizon; a top above it and a foot fix the face's yaw
-            # alone, so their OVP must stand pixel noise.
-            if at_foot and mid <= 0 or (at_foot or mid <= 0) and noisy:
+            # A foot lies below the horizon. A top above it, or a foot, is the face's only
+            # sign of its yaw: its OVP must stand pixel noise.
+            alone = at_foot or mid <= 0
+            if at_foot and mid <= 0 or alone and noisy:
                 continue
             face_outline(fr, p, s, lines, lengths, chains, room_idx, top, d1, d2, at_foot,
-                         mid <= 0 and not at_foot, free_idx, found)
+                         alone, free_idx, found)
 
 
 cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                        double[::1] lengths, list chains, Py_ssize_t[::1] room_idx, tuple edge,
-                       const double* d1, const double* d2, bint at_foot, bint from_below,
+                       const double* d1, const double* d2, bint at_foot, bint alone,
                        Py_ssize_t[::1] free_idx, Hypotheses* found) except *:
     """One hypothesis for :func:`hanging_faces`, appended to ``found``: a face from its
     horizontal ``edge`` (an :func:`edge_chains` chain whose OVP is the direction ``d1``,
@@ -1475,10 +1476,11 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
     side of its middle (the edges of one face, not one edge twice), each upright (at
     ``MIN_SIDE`` or more from the face's edge, pointing at V3 within ``member_angle_deg``).
 
-    An edge may stop short of the face's edge by ``radius_px``, and where it lies wholly
-    on one side (a top seen from below, or a foot: the edges fade against a ceiling, or a
-    contact shadow, shaded like the face) by ``leg_gap_frac`` of its length more, as a
-    corner's vertical leg may. A foot may stop short of the outermost edges as far as
+    An edge may stop short of the face's edge by ``radius_px``, and, where that edge is
+    the face's only sign of its yaw (``alone``: a top seen from below, or a foot; the
+    edges fade against a ceiling, or a contact shadow, shaded like the face), where it
+    lies wholly on one side by ``leg_gap_frac`` of its length more, as a corner's vertical
+    leg may. A foot may stop short of the outermost edges as far as
     :func:`edge_chains` joins pieces across, but not run on past them (something in front
     of them); where each outer edge's line meets it is a floor contact. No room edge may
     join two of the edges' other ends (:func:`room_edge_under`)."""
@@ -1512,7 +1514,7 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
             near = 2 - near
         off = lines[a, 0] * chain[near] + lines[a, 1] * chain[near + 1] + lines[a, 2]
         gap = p.radius_px
-        if from_below or at_foot:  # a near end on the chain's own side stops short
+        if alone:  # a near end on the chain's own side stops short
             side = lines[a, 0] * chain[2 - near] + lines[a, 1] * chain[3 - near] + lines[a, 2]
             gap += p.leg_gap_frac * chain[4] if off * side > 0 else 0.0
         t = (chain[near] - s[a, 0]) * ux + (chain[near + 1] - s[a, 1]) * uy
