@@ -276,6 +276,18 @@ def test_a_camera_pitched_down_finds_v3_among_floor_lines_that_look_vertical(pit
     assert angle_between_directions_deg(direction_of(layout.vps[V3], F, C), down) < 0.5
 
 
+@pytest.mark.parametrize("pitch_deg", [0.0, 2.0, -2.0])
+def test_a_level_camera_keeps_v3_where_floor_lines_below_v2_look_vertical(pitch_deg):
+    # Floor seams 8° off the view: those toward V2 run down the middle of the image
+    # nearly vertical and point at straight down within the thresholds, and they outnumber
+    # the box's three short vertical edges. Refined on them, straight down drifts about 5°
+    # toward V2 and takes the horizon with it; as it is, it completes the true frame.
+    segs, down = _pitched_floor_and_box(pitch_deg, 8.0)
+    layout = detect_layout_vps(segs, W, H, F)
+    assert layout.observed == (True, True, True)
+    assert angle_between_directions_deg(direction_of(layout.vps[V3], F, C), down) < 0.5
+
+
 def test_a_nearby_obstacle_family_does_not_pull_a_layout_vp():
     # A rotated obstacle's horizontal edges, 5° in azimuth from the room's V1 axis: each
     # VP is fitted on the segments that point at it best, so those of the obstacle that

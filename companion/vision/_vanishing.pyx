@@ -32,6 +32,10 @@ from companion.vision._geometry cimport (
 cdef double SAME_V3_DEG = 0.1
 """refined V3s closer than this complete into the same frame"""
 
+cdef double LEVEL_MARGIN = 0.1
+"""the frame of a level camera (V3 straight down, not fitted to any segment) replaces the
+best fitted frame only with more than this share more support"""
+
 
 cdef struct Params:
     double residual_px
@@ -258,19 +262,29 @@ cdef tuple vertical_hypotheses(double[:, ::1] ns, double[:, ::1] lines, double[:
     return hyps_arr, scores_arr
 
 
+cdef Py_ssize_t vertical_inliers(double[:, ::1] ns, double focal, Params* p,
+                                 const unsigned char* is_cand, const double* v3,
+                                 unsigned char[::1] inl):
+    """Mark in ``inl`` the near-vertical segments (``is_cand``) that point at ``v3``;
+    returns their count."""
+    cdef Py_ssize_t i, count = 0
+    for i in range(ns.shape[0]):
+        inl[i] = is_cand[i] and is_inlier(&ns[i, 0], v3, focal, p)
+        count += inl[i]
+    return count
+
+
 cdef bint refine_vertical(double[:, ::1] ns, double[:, ::1] lines, double focal, Params* p,
                           const unsigned char* is_cand, double* best, unsigned char[::1] inl):
     """V3 from hypothesis ``best`` (in place): refined twice on the near-vertical segments,
     ``inl`` its inliers. False (``best`` the default, straight down, and no inliers) when
     fewer than two segments back it or it leans beyond the camera-tilt limit."""
-    cdef Py_ssize_t n = ns.shape[0], i, k, count = 0
+    cdef Py_ssize_t n = ns.shape[0], i, k, count
     cdef double min_cos = cos(radians(p.vertical_max_camera_tilt_deg))
     for k in range(2):
         if not refine(ns, lines, is_cand, focal, p, best):
             break
-    for i in range(n):
-        inl[i] = is_cand[i] and is_inlier(&ns[i, 0], best, focal, p)
-        count += inl[i]
+    count = vertical_inliers(ns, focal, p, is_cand, best, inl)
     if count < 2 or abs(best[1]) / norm3(best) < min_cos:
         for i in range(n):
             inl[i] = 0
@@ -344,8 +358,9 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     ``vertical_alternatives`` distinct V3 hypotheses, and straight down, are each
     completed with their horizontal VPs, and the frame with the most support (V3, V1 and
     V2 together) wins, so that two long oblique lines that happen to meet below the image
-    do not pass for the vertical when the horizontal structure says otherwise. The
-    winner's V1 × V2 is completed as one more V3 hypothesis.
+    do not pass for the vertical when the horizontal structure says otherwise. Straight
+    down unrefined (a level camera) is completed too, and wins only by ``LEVEL_MARGIN``.
+    The winner's V1 × V2 is completed as one more V3 hypothesis.
 
     Returns ``(vps 3×3, observed (v1, v2, v3), supports 3, others K×3, others_support K)``:
     rows V1 (LMVP), V2, V3 and the further horizontal VPs as unit homogeneous pixel points.
@@ -367,10 +382,10 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
     cdef unsigned char[::1] is_cand = np.zeros(n, np.uint8)
     cdef unsigned char[::1] inl = np.zeros(n, np.uint8)
     cdef double v3[3]
-    # At most 15 alternatives and straight down are tried; each refined V3, and the best
-    # frame's V1 × V2 after them, is kept in ``refined``: one more.
+    # At most 15 alternatives and straight down are tried; each refined V3, then straight
+    # down as it is and the best frame's V1 × V2, is kept in ``refined``: two more.
     cdef double tried[16][3]
-    cdef double refined[17][3]
+    cdef double refined[18][3]
     cdef int ntried = 0, nrefined = 0
     cdef bint default_done = False, seen_before
     cdef double[:, ::1] hv
@@ -409,6 +424,17 @@ def layout_vps(segments_px, double cx, double cy, double focal, params):
                 continue
             frame = horizontal_frame(ns, lines, lengths, focal, &p, v3, ok, inl)
             if best is None or frame[0] > best[0]:
+                best = frame
+        # Straight down as it is: a level camera, as a multicopter's nearly is. Refined,
+        # straight down can be led away by the floor's lines toward V2: below V2 they look
+        # vertical, point at it within the thresholds and outnumber a room's few short
+        # vertical edges, and V3 drifts several degrees toward V2, taking the horizon with
+        # it. Fitted to no segment, this frame must be clearly better supported to win.
+        v3[0], v3[1], v3[2] = 0.0, 1.0, 0.0
+        if not default_done and new_direction(v3, refined, &nrefined, SAME_V3_DEG):
+            ok = vertical_inliers(ns, focal, &p, &is_cand[0], v3, inl) >= 2
+            frame = horizontal_frame(ns, lines, lengths, focal, &p, v3, ok, inl)
+            if best is None or frame[0] > (1.0 + LEVEL_MARGIN) * best[0]:
                 best = frame
         # The horizontal VPs, resting on many long edges, fix V3 as the direction ⟂ both.
         # Where the true verticals are few and short, no pair of them may be among the

@@ -8,7 +8,10 @@ that needs no calibration beyond a rough focal length and never divides by zero:
    scored MSAC-style by the length of the segments that point at it. The best few
    (``vertical_alternatives``) and straight down (a level camera) are each refined by
    least squares over their inliers and completed into a frame (steps 2–3); the frame
-   with the most support, V3's and V1's and V2's together, is the layout. Its V1 × V2,
+   with the most support, V3's and V1's and V2's together, is the layout. Straight down
+   is also completed as it is, unrefined: below V2 the floor's lines look vertical and
+   can lead its refinement several degrees astray; fitted to nothing, that frame must
+   have a tenth more support to win. The layout's V1 × V2,
    the direction at a right angle to both, is then completed too and wins if better
    supported: below a camera pitched down, floor lines toward V2 look near-vertical, and
    a box's few short vertical edges may make no hypothesis of their own.
