@@ -1461,17 +1461,18 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
             alone = at_foot or mid <= 0
             if at_foot and mid <= 0 or alone and noisy:
                 continue
-            face_outline(fr, p, s, lines, lengths, chains, room_idx, top, d1, d2, at_foot,
-                         alone, free_idx, found)
+            face_outline(fr, p, s, lines, lengths, chains, room_idx, top, o, d1, d2,
+                         at_foot, alone, free_idx, found)
 
 
 cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                        double[::1] lengths, list chains, Py_ssize_t[::1] room_idx, tuple edge,
-                       const double* d1, const double* d2, bint at_foot, bint alone,
+                       const double* o, const double* d1, const double* d2, bint at_foot,
+                       bint alone,
                        Py_ssize_t[::1] free_idx, Hypotheses* found) except *:
     """One hypothesis for :func:`hanging_faces`, appended to ``found``: a face from its
     horizontal ``edge`` (an :func:`edge_chains` chain whose OVP is the direction ``d1``,
-    ``d2`` at a right angle to it) and the vertical edges ``chains`` whose upper ends
+    the pixel point ``o``, ``d2`` at a right angle to it) and the vertical edges ``chains`` whose upper ends
     (``at_foot``: lower ends) lie on its line, between its ends: two or more, one on each
     side of its middle (the edges of one face, not one edge twice), each upright (at
     ``MIN_SIDE`` or more from the face's edge, pointing at V3 within ``member_angle_deg``).
@@ -1484,7 +1485,7 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
     :func:`edge_chains` joins pieces across, but not run on past them (something in front
     of them); where each outer edge's line meets it is a floor contact. No room edge may
     join two of the edges' other ends (:func:`room_edge_under`)."""
-    cdef double o[3]
+    cdef double c[3]
     cdef double o1[3]
     cdef double o2[3]
     cdef double e1[3]
@@ -1528,9 +1529,9 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
             continue
         if at_foot:  # where the edge's line meets the foot: the floor contact
             b = chain[5]
-            if not intersect(&lines[b, 0], &lines[a, 0], o) or fabs(o[2]) < 1e-12:
+            if not intersect(&lines[b, 0], &lines[a, 0], c) or fabs(c[2]) < 1e-12:
                 continue
-            point = (chain[2 - near], chain[3 - near], o[0] / o[2], o[1] / o[2])
+            point = (chain[2 - near], chain[3 - near], c[0] / c[2], c[1] / c[2])
         else:
             point = (chain[near], chain[near + 1])
         upright += 1
@@ -1549,20 +1550,19 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
     set_ovps(h, d1, d2, horizon_error(fr, d1), tallest)
     h.legs[0] = a
     h.nlegs = 1
-    if not at_foot:
-        intersect(&lines[a, 0], fr.horizon, o)
+    if not at_foot:  # a top's receding edges show only from above; a foot's are hidden
         receding_top_legs(fr, p, s, edge, o, free_idx, h)
-    if h.nlegs > 1:
-        # The top edge's far crossing fixes the other OVP poorly when the face is seen
-        # nearly front-on (about 4° of bearing per pixel in the closed loop's room):
-        # both OVPs are fitted as one box's yaw to the top edge and the receding ones.
-        pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
-        if intersect(&lines[h.legs[1], 0], fr.horizon, o2) and box_ovps_fit(
-                fr, s, lines, [h.legs[k] for k in range(h.nlegs)], sin(radians(3.0)),
-                o1, o2):
-            direction_of(fr, o1, e1)
-            direction_of(fr, o2, e2)
-            set_ovps(h, e1, e2, horizon_error(fr, e1), tallest)
+        if h.nlegs > 1:
+            # The top edge's far crossing fixes the other OVP poorly when the face is seen
+            # nearly front-on (about 4° of bearing per pixel in the closed loop's room):
+            # both OVPs are fitted as one box's yaw to the top edge and the receding ones.
+            pixel_point(fr.f, fr.cx, fr.cy, d1, o1)
+            if intersect(&lines[h.legs[1], 0], fr.horizon, o2) and box_ovps_fit(
+                    fr, s, lines, [h.legs[k] for k in range(h.nlegs)], sin(radians(3.0)),
+                    o1, o2):
+                direction_of(fr, o1, e1)
+                direction_of(fr, o2, e2)
+                set_ovps(h, e1, e2, horizon_error(fr, e1), tallest)
     points = at_lo + at_hi  # (x, y) pairs: two tops, or two edges' upper ends and feet
     h.npoints = len(points) // 2
     for k in range(len(points)):
