@@ -1252,6 +1252,23 @@ def test_legs_under_one_end_of_an_edge_make_no_table():
                           labels) == []
 
 
+def test_an_edge_running_on_past_both_its_vertical_edges_makes_no_table():
+    # Two vertical edges either side of the middle, 0.4 m apart under a 1.4 m edge: the
+    # edge runs on past both by more than they span, no top of theirs (a line across the
+    # sides of two things standing close together). A table's legs stand near its ends.
+    from companion.vision.obstacles import find_obstacles
+
+    def found(legs_at):
+        segs, _, _ = _table_from_the_front(legs_at=legs_at)
+        labels = np.array([NONE, V3, V3])
+        return find_obstacles(segs, find_corners(segs, labels), _room_layout(),
+                              labels == NONE, labels)
+
+    assert found((0.5, 0.9)) == []
+    for inset in (0.1, 0.2):  # legs set in from the ends, as a table's are
+        assert [o.rule for o in found((inset, 1.4 - inset))] == ["hanging face"]
+
+
 def test_a_face_whose_bottom_edge_is_a_room_edge_is_no_table():
     # A face whose top edge is found 8° off the room while a room edge (along V1, the
     # image's rows here) joins the feet of its vertical edges: its bottom edge is the

@@ -26,6 +26,7 @@ from companion.vision._geometry cimport (
 
 cdef double INF = float("inf")
 cdef double MIN_SIDE = sin(radians(20.0))  # a leg leaves its vertical edge at 20° or more
+cdef double MIN_TOP_SPAN = 0.5  # a top's outermost hanging edges span half of it or more
 
 # The rules an obstacle hypothesis comes from, in find_obstacles' order (a diagnosis: which
 # rule read each detection and each false alarm).
@@ -1475,7 +1476,8 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
     the pixel point ``o``, ``d2`` at a right angle to it) and the vertical edges ``chains`` whose upper ends
     (``at_foot``: lower ends) lie on its line, between its ends: two or more, one on each
     side of its middle (the edges of one face, not one edge twice), each upright (at
-    ``MIN_SIDE`` or more from the face's edge, pointing at V3 within ``member_angle_deg``).
+    ``MIN_SIDE`` or more from the face's edge, pointing at V3 within ``member_angle_deg``),
+    the outermost two spanning at least ``MIN_TOP_SPAN`` of a top's length.
 
     An edge may stop short of the face's edge by ``radius_px``, and, where that edge is
     the face's only sign of its yaw (``alone``: a top seen from below, or a foot; the
@@ -1541,6 +1543,11 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
             hi, at_hi = t, point
         tallest = max(tallest, chain[4])
     if upright < 2 or lo > middle or hi < middle:
+        return
+    # A face's outline edges stand at its top's ends, a table's legs a little inside them;
+    # a top running on past both by more than they span is no top of theirs (a line
+    # across the sides of two things that stand close together).
+    if not at_foot and hi - lo < MIN_TOP_SPAN * (t1 - t0):
         return
     if at_foot and (t0 < lo - reach or t1 > hi + reach):
         return

@@ -140,9 +140,10 @@ def find_obstacles(
     edge-on there (``edge_on_deg``), on either side of the unseen edge, one of them
     running on to a vertical edge at its far end; a box showing one face; and last a
     face's top edge with vertical edges hanging from it (a table seen from the front, its
-    legs under the top). Taking the first rule that found anything instead let a weaker
-    rule's wrong reading (a face of an aligned box bent by the lens, a table read on the
-    wrong legs) hide another rule's reading of the obstacle. An obstacle edge-on at every
+    legs under the top; the outermost two spanning half the top or more). Taking the
+    first rule that found anything instead let a weaker rule's wrong reading (a face of
+    an aligned box bent by the lens, a table read on the wrong legs) hide another rule's
+    reading of the obstacle. An obstacle edge-on at every
     corner (:func:`edge_on_angle_deg` below ``edge_on_deg``) is dropped; when the pairs'
     obstacles are all dropped, the other rules run as if none had been found.
 
