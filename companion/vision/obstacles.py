@@ -143,9 +143,9 @@ def find_obstacles(
     legs under the top; the outermost two spanning half the top or more). Taking the
     first rule that found anything instead let a weaker rule's wrong reading (a face of
     an aligned box bent by the lens, a table read on the wrong legs) hide another rule's
-    reading of the obstacle. An obstacle edge-on at every
-    corner (:func:`edge_on_angle_deg` below ``edge_on_deg``) is dropped; when the pairs'
-    obstacles are all dropped, the other rules run as if none had been found.
+    reading of the obstacle. An obstacle edge-on at every corner (:func:`edge_on_angle_deg`
+    below ``edge_on_deg``) is dropped; when the pairs' obstacles are all dropped, the
+    other rules run as if none had been found.
 
     Each obstacle names the rule that read it (``Obstacle.rule``, for diagnosis; the
     group's first hypothesis's when several read one box): ``corner pair`` (eqs. 5–8, a
