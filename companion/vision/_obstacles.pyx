@@ -1469,15 +1469,15 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
 cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                        double[::1] lengths, list chains, Py_ssize_t[::1] room_idx, tuple edge,
                        const double* o, const double* d1, const double* d2, bint at_foot,
-                       bint alone,
-                       Py_ssize_t[::1] free_idx, Hypotheses* found) except *:
+                       bint alone, Py_ssize_t[::1] free_idx, Hypotheses* found) except *:
     """One hypothesis for :func:`hanging_faces`, appended to ``found``: a face from its
     horizontal ``edge`` (an :func:`edge_chains` chain whose OVP is the direction ``d1``,
-    the pixel point ``o``, ``d2`` at a right angle to it) and the vertical edges ``chains`` whose upper ends
-    (``at_foot``: lower ends) lie on its line, between its ends: two or more, one on each
-    side of its middle (the edges of one face, not one edge twice), each upright (at
-    ``MIN_SIDE`` or more from the face's edge, pointing at V3 within ``member_angle_deg``),
-    the outermost two spanning at least ``MIN_TOP_SPAN`` of a top's length.
+    the pixel point ``o``, ``d2`` at a right angle to it) and the vertical edges ``chains``
+    whose upper ends (``at_foot``: lower ends) lie on its line, between its ends: two or
+    more, one on each side of its middle (the edges of one face, not one edge twice), each
+    upright (at ``MIN_SIDE`` or more from the face's edge, pointing at V3 within
+    ``member_angle_deg``), the outermost two spanning at least ``MIN_TOP_SPAN`` of a top's
+    length.
 
     An edge may stop short of the face's edge by ``radius_px``, and, where that edge is
     the face's only sign of its yaw (``alone``: a top seen from below, or a foot; the
