@@ -1252,6 +1252,31 @@ def test_legs_under_one_end_of_an_edge_make_no_table():
                           labels) == []
 
 
+def test_a_collinear_line_beyond_the_gaps_does_not_steer_a_top():
+    # A longer line on the top edge's line within the collinear tolerance (3 px), but
+    # further off than the gaps edge_chains joins across: another thing's edge, its
+    # direction 0.6° off the top's. Near the horizon that turns the top's OVP by degrees,
+    # so the top's direction must be its own.
+    from companion.vision.obstacles import find_obstacles
+
+    segs, u, v = _table_from_the_front()
+    p0, p1 = segs[0, :2], segs[0, 2:]
+    top = np.linalg.norm(p1 - p0)
+    d = (p1 - p0) / top
+    pivot = p0 - (0.5 * top + 20.0) * d  # beyond radius_px + leg_gap_frac of the top
+    tilt = np.arcsin(2.5 / (0.5 * top + 20.0 + top))  # the top's far end 2.5 px off it
+    c, s_ = np.cos(tilt), np.sin(tilt)
+    far = pivot - 1.2 * top * np.array([c * d[0] - s_ * d[1], s_ * d[0] + c * d[1]])
+    segs = np.vstack([segs, [*far, *pivot]])
+    labels = np.array([NONE, V3, V3, NONE])
+    obstacles = find_obstacles(segs, find_corners(segs, labels), _room_layout(),
+                               labels == NONE, labels)
+    assert len(obstacles) == 1 and obstacles[0].rule == "hanging face"
+    dirs = direction_of(obstacles[0].ovps[:2], F, C)
+    for face in (u, v):
+        assert angle_between_directions_deg(dirs, face[None, :]).min() < 0.5
+
+
 def test_an_edge_running_on_past_both_its_vertical_edges_makes_no_table():
     # Two vertical edges either side of the middle, 0.4 m apart under a 1.4 m edge: the
     # edge runs on past both by more than they span, no top of theirs (a line across the

@@ -424,8 +424,9 @@ cdef list edge_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] line
     """Edges: the segments ``verticals`` (V3's, or the free legs) joined with collinear
     ones among them (λ1, eq. 6) across small gaps, as the detector breaks one edge where
     its background changes. Returns a list of (x_a, y_a, x_b, y_b, length, base), the two
-    extreme endpoints, which lie on the line of ``base``, the longest member (whose
-    direction is the most accurate)."""
+    extreme endpoints, which lie on the line of ``base``, the longest member joined (whose
+    direction is the most accurate; a collinear segment beyond the gaps is another
+    thing's edge, and its direction is not this edge's)."""
     cdef Py_ssize_t nv = verticals.shape[0], i, j, e, k, vi, vj, m, base
     chains = []
     if nv == 0:
@@ -488,14 +489,28 @@ cdef list edge_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] line
                 vj = verticals[j]
                 ta = (s[vj, 0] - ox) * axx + (s[vj, 1] - oy) * axy
                 tb = (s[vj, 2] - ox) * axx + (s[vj, 3] - oy) * axy
-                spans.append((min(ta, tb), max(ta, tb)))
+                spans.append((min(ta, tb), max(ta, tb), vj))
                 if j == i:
                     lo, hi = min(ta, tb), max(ta, tb)
         spans.sort()
-        for a, b in spans + spans[::-1]:
+        joined = [vi]
+        for a, b, vj in spans + spans[::-1]:
             gap = p.radius_px + p.leg_gap_frac * (hi - lo)
             if a <= hi + gap and b >= lo - gap:
                 lo, hi = min(lo, a), max(hi, b)
+                joined.append(vj)
+        m = vi  # the longest member joined: the chain's line, measured along it again
+        for vj in joined:
+            m = vj if lengths[vj] > lengths[m] else m
+        if m != base:
+            base = m
+            ox, oy = s[base, 0], s[base, 1]
+            axx, axy = (s[base, 2] - ox) / lengths[base], (s[base, 3] - oy) / lengths[base]
+            lo, hi = INF, -INF
+            for vj in joined:
+                for e in range(2):
+                    ta = (s[vj, 2 * e] - ox) * axx + (s[vj, 2 * e + 1] - oy) * axy
+                    lo, hi = min(lo, ta), max(hi, ta)
         if hi - lo >= 2 * p.min_edge_px:
             chains.append((ox + lo * axx, oy + lo * axy, ox + hi * axx, oy + hi * axy, hi - lo,
                            base))
