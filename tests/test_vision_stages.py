@@ -1255,7 +1255,7 @@ def test_legs_under_one_end_of_an_edge_make_no_table():
 def test_a_collinear_line_beyond_the_gaps_does_not_steer_a_top():
     # A longer line on the top edge's line within the collinear tolerance (3 px), but
     # further off than the gaps edge_chains joins across: another thing's edge, its
-    # direction 0.6° off the top's. Near the horizon that turns the top's OVP by degrees,
+    # direction 0.7° off the top's. Near the horizon that turns the top's OVP by degrees,
     # so the top's direction must be its own.
     from companion.vision.obstacles import find_obstacles
 
