@@ -419,6 +419,19 @@ cdef bint partner_ovps(Frame* fr, Params* p, double[:, ::1] lines, Py_ssize_t le
     return found
 
 
+cdef inline void chain_axis(double[:, ::1] s, Py_ssize_t base, double* ox, double* oy,
+                            double* axx, double* axy) noexcept:
+    """The line a chain is measured along: segment ``base``'s first endpoint and its unit
+    direction."""
+    cdef double nrm
+    ox[0], oy[0] = s[base, 0], s[base, 1]
+    axx[0], axy[0] = s[base, 2] - ox[0], s[base, 3] - oy[0]
+    nrm = hypot(axx[0], axy[0])
+    nrm = nrm if nrm > 1e-9 else 1e-9
+    axx[0] /= nrm
+    axy[0] /= nrm
+
+
 cdef list edge_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] lines,
                       Py_ssize_t[::1] verticals, Params* p):
     """Edges: the segments ``verticals`` (V3's, or the free legs) joined with collinear
@@ -435,7 +448,7 @@ cdef list edge_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] line
     # piece's own direction is too noisy to extrapolate along a long edge.
     cdef unsigned char[:, ::1] collinear = np.zeros((nv, nv), np.uint8)
     cdef Py_ssize_t[::1] members_count = np.zeros(nv, np.intp)
-    cdef double d, dist, lo, hi, gap, ox, oy, axx, axy, nrm, ta, tb
+    cdef double d, dist, lo, hi, gap, ox, oy, axx, axy, ta, tb
     for i in range(nv):
         for j in range(nv):
             if i == j:
@@ -477,12 +490,7 @@ cdef list edge_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] line
         for j in range(nv):
             if collinear[i, j] and j != i and lengths[verticals[j]] > lengths[base]:
                 base = verticals[j]
-        ox, oy = s[base, 0], s[base, 1]
-        axx, axy = s[base, 2] - ox, s[base, 3] - oy
-        nrm = hypot(axx, axy)
-        nrm = nrm if nrm > 1e-9 else 1e-9
-        axx /= nrm
-        axy /= nrm
+        chain_axis(s, base, &ox, &oy, &axx, &axy)
         spans = []
         for j in range(nv):
             if collinear[i, j]:
@@ -504,8 +512,7 @@ cdef list edge_chains(double[:, ::1] s, double[::1] lengths, double[:, ::1] line
             m = vj if lengths[vj] > lengths[m] else m
         if m != base:
             base = m
-            ox, oy = s[base, 0], s[base, 1]
-            axx, axy = (s[base, 2] - ox) / lengths[base], (s[base, 3] - oy) / lengths[base]
+            chain_axis(s, base, &ox, &oy, &axx, &axy)
             lo, hi = INF, -INF
             for vj in joined:
                 for e in range(2):
