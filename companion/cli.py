@@ -115,6 +115,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="with --renderer: each split room seen by the camera pitched DEG "
                          "further nose down (-30 to 30), as a multicopter's fixed camera "
                          "sees it while it accelerates forward")
+    ev.add_argument("--rug", action="store_true",
+                    help="with --renderer: each split room with a striped rug turned 10–80° "
+                         "off the room's axes on the floor in front of the camera (the "
+                         "path-traced split rooms have none of their own)")
     ev.add_argument("--as-video", action="store_true",
                     help="with --renderer: each camera's frames of the split run in order "
                          "through one pipeline, as companion --video runs a recording, so "
@@ -306,6 +310,8 @@ def run_eval(args) -> int:
         raise UserError("--eye-level goes with --renderer NAME (not --clips)")
     if args.pitch and (args.clips or not args.renderer):
         raise UserError("--pitch goes with --renderer NAME (not --clips)")
+    if args.rug and (args.clips or not args.renderer):
+        raise UserError("--rug goes with --renderer NAME (not --clips)")
     if not -30.0 <= args.pitch <= 30.0:
         raise UserError(f"--pitch {args.pitch:g}: give -30 to 30 degrees")
     if args.as_video and (args.clips or args.lens_given or not args.renderer):
@@ -428,11 +434,12 @@ def run_eval_splits(args) -> int:
                                            d, t, f"{r} {s}"), focal_given=args.focal_given,
                                        lens_given=args.lens_given, mirrored=args.mirrored,
                                        eye_level=args.eye_level, pitch_deg=args.pitch,
-                                       as_video=args.as_video)
+                                       as_video=args.as_video, rug=args.rug)
             finally:
                 progress.close()
         for line in format_splits(renderer, reports, args.focal_given, args.lens_given,
-                                  args.mirrored, args.eye_level, args.pitch, args.as_video):
+                                  args.mirrored, args.eye_level, args.pitch, args.as_video,
+                                  args.rug):
             print(line)
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
@@ -445,6 +452,7 @@ def run_eval_splits(args) -> int:
           + (" --mirrored" if args.mirrored else "")
           + (" --eye-level" if args.eye_level else "")
           + (f" --pitch {args.pitch:g}" if args.pitch else "")
+          + (" --rug" if args.rug else "")
           + (" --as-video" if args.as_video else "") + ")")
     if args.json:
         with _open_output(args.json, "figures") as f:
@@ -452,7 +460,7 @@ def run_eval_splits(args) -> int:
     if args.frames:
         from sitl.frames import frame_rows, reading_of, view_of
 
-        view = view_of(args.eye_level, args.pitch)
+        view = view_of(args.eye_level, args.pitch, args.rug)
         reading = reading_of(args.as_video, args.focal_given, args.lens_given)
         _write_frames(args.frames, [
             row for renderer, reports in by_renderer.items() for s, by_cam in reports.items()

@@ -61,6 +61,7 @@ from sitl.scene import (
     orientations,
     random_scene,
     render,
+    rug_in_view,
 )
 from sitl.workers import SPAWN
 
@@ -106,7 +107,8 @@ class View:
     of horizontal field of view (None: the room's own draw), the frame ``mirrored`` left to
     right (:func:`sitl.scene.mirror`), from the height of the rotated obstacle's top
     (``eye_level``, :func:`sitl.scene.at_eye_level`), pitched ``pitch_deg`` further nose
-    down."""
+    down, with a rotated striped rug laid in front of the camera (``rug``,
+    :func:`sitl.scene.rug_in_view`; the room's own rug, if any, taken up)."""
 
     width: int = 640
     height: int = 480
@@ -114,6 +116,7 @@ class View:
     mirrored: bool = False
     eye_level: bool = False
     pitch_deg: float = 0.0
+    rug: bool = False
 
 
 @dataclass(frozen=True)
@@ -264,6 +267,8 @@ def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float, vie
     if renderer == "scene":
         scene, cam = random_scene(rng, w, h, obstacle=has_obstacle, hfov_deg=view.hfov_deg,
                                   eye_level=view.eye_level)
+        if view.rug:
+            scene = replace(scene, room=_with_rug(scene.room, cam, seed, index))
         return render(scene, _pitched(cam, view.pitch_deg))
     if renderer != "pathtraced":
         raise ValueError(f"unknown renderer {renderer!r}")
@@ -272,12 +277,26 @@ def _draw_scene(renderer: str, seed: int, index: int, obstacle_share: float, vie
     fov = "any" if view.hfov_deg is None else f"{view.hfov_deg:g}"
     eye = "eye-" if view.eye_level and has_obstacle else ""
     pitch = f"pitch{view.pitch_deg:g}-" if view.pitch_deg else ""
-    name = f"{w}x{h}-{fov}/{pitch}{eye}{seed}-{index}-share{obstacle_share:g}.png"
+    rug = "rug-" if view.rug else ""
+    name = f"{w}x{h}-{fov}/{rug}{pitch}{eye}{seed}-{index}-share{obstacle_share:g}.png"
     # Small frames get more samples per pixel: the same light per unit of the scene.
     spp = 16 if w * h >= 640 * 480 else 32
     r3, cam = pathtraced.random_room(rng, w, h, obstacle=has_obstacle, hfov_deg=view.hfov_deg,
                                      spp=spp, eye_level=view.eye_level)
+    if view.rug:
+        r3 = replace(r3, room=_with_rug(r3.room, cam, seed, index))
     return _render_cached(name, r3, _pitched(cam, view.pitch_deg))
+
+
+def _with_rug(room, cam, seed: int, index: int):
+    """``room`` with a rug in front of ``cam`` (:func:`sitl.scene.rug_in_view`), drawn from
+    a stream of its own, so that the room and camera are the ones drawn without it."""
+    return replace(room, rug=rug_in_view(np.random.default_rng([seed, index, RUG_STREAM]),
+                                         room, cam))
+
+
+RUG_STREAM = 7
+"""the third word of the seed of ``--rug``'s rug: [split seed, room index, this]"""
 
 
 def _pitched(cam, pitch_deg: float):
@@ -537,19 +556,20 @@ def run_split(renderer: str, split: str, config: Config | None = None,
               workers: int | None = None, progress=None, focal_given: bool = False,
               lens_given: bool = False, mirrored: bool = False,
               eye_level: bool = False, pitch_deg: float = 0.0,
-              as_video: bool = False) -> dict[str, EvalReport]:
+              as_video: bool = False, rug: bool = False) -> dict[str, EvalReport]:
     """One frozen split of one renderer at every camera of :data:`CAMERAS`, focal length
     not given (unless ``focal_given``, or ``lens_given``: the focal length and the lens
     distortion, diagnoses): {camera label: report}. ``mirrored``: each frame also run
     mirrored, pooled (:func:`run_eval`). ``eye_level``: the split's rooms seen from their
     rotated obstacle's height (:func:`sitl.scene.at_eye_level`). ``pitch_deg``: seen by the
-    camera pitched that much further nose down. ``as_video``: each camera's frames run in
-    order through one pipeline (:func:`evaluate_video`; not with ``lens_given``: the rooms'
-    lenses differ). ``progress(done, total)`` counts frames."""
+    camera pitched that much further nose down. ``rug``: a rotated striped rug laid in front
+    of each room's camera (:func:`sitl.scene.rug_in_view`). ``as_video``: each camera's
+    frames run in order through one pipeline (:func:`evaluate_video`; not with
+    ``lens_given``: the rooms' lenses differ). ``progress(done, total)`` counts frames."""
     seed, scenes = SPLITS[(renderer, split)]
     per_camera = scenes * (2 if mirrored else 1)
     total = per_camera * len(CAMERAS)
-    views = {label: View(w, h, fov, eye_level=eye_level, pitch_deg=pitch_deg)
+    views = {label: View(w, h, fov, eye_level=eye_level, pitch_deg=pitch_deg, rug=rug)
              for label, w, h, fov in CAMERAS}
     if as_video:
         if lens_given:
@@ -605,7 +625,8 @@ def _split_target(label: str) -> dict[str, float]:
 def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
                   focal_given: bool = False, lens_given: bool = False,
                   mirrored: bool = False, eye_level: bool = False,
-                  pitch_deg: float = 0.0, as_video: bool = False) -> list[str]:
+                  pitch_deg: float = 0.0, as_video: bool = False,
+                  rug: bool = False) -> list[str]:
     """One table for a renderer: a row per camera and split, issue 18's targets beside;
     then, per row, the obstacles seen at eye level, by furniture kind, and the range."""
 
@@ -624,6 +645,8 @@ def format_splits(renderer: str, reports: dict[str, dict[str, EvalReport]],
         given += "; each room seen from its rotated obstacle's height"
     if pitch_deg:
         given += f"; the camera pitched {pitch_deg:g}° further nose down"
+    if rug:
+        given += "; a rotated striped rug on the floor in front of each room's camera"
     if as_video:
         given += ("; each camera's frames run in order as one video (what it learns of its "
                   "camera carried from frame to frame), η of each frame")

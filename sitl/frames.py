@@ -40,10 +40,11 @@ OUTCOME_FIELDS = ("has_obstacle", "detectable", "eta_true_deg", "eta_est_deg")
 """the fields :func:`frame_changes` compares"""
 
 
-def view_of(eye_level: bool = False, pitch_deg: float = 0.0) -> str:
-    """A row's ``view``: where the camera stood (``--eye-level``, ``--pitch``)."""
+def view_of(eye_level: bool = False, pitch_deg: float = 0.0, rug: bool = False) -> str:
+    """A row's ``view``: where the camera stood (``--eye-level``, ``--pitch``) and what was
+    laid in front of it (``--rug``)."""
     where = (["eye level"] if eye_level else []) + (
-        [f"pitched {pitch_deg:g}°"] if pitch_deg else [])
+        [f"pitched {pitch_deg:g}°"] if pitch_deg else []) + (["a rug laid"] if rug else [])
     return ", ".join(where) or AS_DRAWN
 
 

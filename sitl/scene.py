@@ -44,6 +44,7 @@ __all__ = [
     "random_colour",
     "random_decorations",
     "random_scene",
+    "rug_in_view",
     "write_video",
     "yaw_sweep",
     "RENDERERS",
@@ -768,6 +769,23 @@ def random_scene(
     if eye_level and rotated is not None:
         cam = at_eye_level(rng, cam, rotated.height)
     return scene, cam
+
+
+def rug_in_view(rng: np.random.Generator, room: Room, cam: Camera) -> Rug:
+    """A striped rug turned 10°–80° off the room's axes on the floor in front of ``cam``
+    (all randomness from ``rng``): its centre 1.5–4.5 m ahead, within the middle 60 % of
+    the field of view, inside the room. Furniture may stand on it, as on a real rug.
+
+    A rug is the clutter that fools the fewer-corner rules (stripes meeting an aligned
+    box's edge read as a rotated face); ``companion eval --rug`` lays one in every split
+    room, the path-traced splits having none of their own."""
+    dist = rng.uniform(1.5, 4.5)
+    bearing = math.radians(cam.yaw_deg + rng.uniform(-0.3, 0.3) * cam.hfov_deg)
+    margin = 0.6
+    x = float(np.clip(cam.x + dist * math.cos(bearing), room.x_min + margin, room.x_max - margin))
+    y = float(np.clip(cam.y + dist * math.sin(bearing), room.y_min + margin, room.y_max - margin))
+    return Rug(x, y, float(rng.uniform(10.0, 80.0)), float(rng.uniform(1.2, 2.5)),
+               float(rng.uniform(0.8, 1.6)), random_colour(rng, 0.2, 0.6))
 
 
 EYE_LEVEL_M = 0.15

@@ -384,6 +384,9 @@ def test_bench_and_sim_reject_bad_arguments_in_one_line():
     _assert_one_line_error(run("eval", "--renderer", "scene", "--clips", "--eye-level"),
                            "--eye-level goes with --renderer")
     _assert_one_line_error(run("eval", "--pitch", "10"), "--pitch goes with --renderer")
+    _assert_one_line_error(run("eval", "--rug"), "--rug goes with --renderer")
+    _assert_one_line_error(run("eval", "--renderer", "scene", "--clips", "--rug"),
+                           "--rug goes with --renderer")
     _assert_one_line_error(run("eval", "--renderer", "scene", "--pitch", "40"),
                            "give -30 to 30 degrees")
     for extra in ((), ("--renderer", "scene", "--clips"), ("--renderer", "scene", "--lens-given")):

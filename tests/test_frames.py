@@ -126,6 +126,7 @@ def test_the_diff_says_how_each_run_read_its_frames_and_keeps_views_apart(tmp_pa
 def test_a_rows_view_and_reading_say_what_the_run_options_were():
     assert view_of() == "as drawn"
     assert view_of(eye_level=True, pitch_deg=10.0) == "eye level, pitched 10°"
+    assert view_of(rug=True) == "a rug laid"
     assert reading_of() == "each frame alone"
     assert reading_of(as_video=True, focal_given=True) == "as a video, focal length given"
     assert reading_of(focal_given=True, lens_given=True) == (

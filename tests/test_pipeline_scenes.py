@@ -2,6 +2,7 @@
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 
@@ -13,6 +14,7 @@ from sitl.evaluate import (
     EvalReport,
     SceneResult,
     View,
+    _with_rug,
     draw_scene,
     evaluate_scene,
     evaluate_video,
@@ -22,11 +24,14 @@ from sitl.sample import sample_scene
 from sitl.scene import (
     Box,
     Camera,
+    Room,
     Scene,
     mirror,
     random_scene,
     render,
     render_image,
+    rug_in_view,
+    yaw_axes,
     yaw_sweep,
 )
 
@@ -451,3 +456,50 @@ def test_the_stages_after_the_line_detector_do_not_depend_on_handedness():
                     assert sorted(map(tuple, np.round(flipped, 6))) == sorted(
                         map(tuple, np.round(a.corners_px, 6)))
     assert found >= 4  # the rooms show obstacles: the test compares answers, not silences
+
+
+def _rug_mask(rug, cam: Camera) -> np.ndarray:
+    """The pixels ``rug`` covers (floor seen through ``cam``), grown by 3 px for the blur."""
+    a1, a2 = yaw_axes(rug.yaw_deg)
+    centre = np.array([rug.x, rug.y, 0.0])
+    # Dense points on the rug (its outline alone may leave the frame).
+    s, t = np.meshgrid(np.linspace(-1, 1, 60), np.linspace(-1, 1, 60))
+    pts = (centre + (s.ravel()[:, None] * rug.length / 2) * a1
+           + (t.ravel()[:, None] * rug.width / 2) * a2)
+    uv, z = cam.project(pts)
+    mask = np.zeros((cam.height, cam.width), np.uint8)
+    for u, v in uv[z > 0].round().astype(int):
+        if 0 <= u < cam.width and 0 <= v < cam.height:
+            mask[v, u] = 1
+    return cv2.dilate(mask, np.ones((9, 9), np.uint8)) > 0
+
+
+def test_a_view_with_a_rug_is_the_same_room_with_a_striped_rug_laid_in_front_of_the_camera():
+    # `companion eval --rug`: the rooms and cameras are those drawn without it (the rug
+    # has a random stream of its own), the truth is unchanged (a rug has no vertical
+    # edges: no obstacle), and the picture changes only where the rug lies. Of seed 11's
+    # rooms 2, 3 and 4 (0, 1 and 5 have a rug of their own, which `--rug` takes up), the
+    # rug shows in 3 and 4; room 2's lies behind its rotated box.
+    shown = []
+    for index in (2, 3, 4):
+        rng = np.random.default_rng([11, index])
+        scene, cam = random_scene(rng, obstacle=bool(rng.random() < 0.7))
+        assert scene.room.rug is None
+        plain, truth = draw_scene("scene", 11, index)
+        laid, truth_laid = draw_scene("scene", 11, index, view=View(rug=True))
+        assert truth_laid == truth
+        rug = _with_rug(scene.room, cam, 11, index).rug
+        assert rug is not None and 10.0 <= rug.yaw_deg % 90.0 <= 80.0
+        changed = np.abs(plain.astype(int) - laid.astype(int)).max(axis=2) > 0
+        assert not (changed & ~_rug_mask(rug, cam)).any()
+        shown.append(changed.mean() > 0.01)
+    assert shown == [False, True, True]
+
+
+def test_a_rug_in_view_lies_on_the_floor_ahead_inside_the_room():
+    room, cam = Room(x_min=0.0, x_max=6.0, y_min=-2.0, y_max=2.0), Camera(x=1.0, yaw_deg=30.0)
+    for seed in range(50):
+        rug = rug_in_view(np.random.default_rng(seed), room, cam)
+        assert room.x_min < rug.x < room.x_max and room.y_min < rug.y < room.y_max
+        (u, _v), z = (a[0] for a in cam.project(np.array([[rug.x, rug.y, 0.0]])))
+        assert z > 0 and 0 <= u < cam.width
