@@ -79,12 +79,12 @@ from sitl.scene import (
     Box,
     Camera,
     Room,
-    Rug,
     Scene,
     random_colour,
     random_decorations,
     render_image,
     scene_truth,
+    striped_rug,
 )
 from sitl.workers import SPAWN
 
@@ -228,8 +228,7 @@ def draw_approach(seed: int, run: int, eye_level: bool = False,
     clutter = bool(rng.random() < 0.5)
     rug = None
     if clutter:
-        rug = Rug(u(3.0, length - 2.0), u(-width / 4, width / 4), u(10.0, 80.0), u(1.2, 2.5),
-                  u(0.8, 1.6), random_colour(rng, 0.2, 0.6))
+        rug = striped_rug(rng, u(3.0, length - 2.0), u(-width / 4, width / 4))
     room = replace(room0, decorations=random_decorations(rng, room0, clutter), rug=rug)
     drawn = Approach(
         run=run, room=room, boxes=tuple(boxes), start_x_m=sx, start_y_m=sy, course_deg=course,

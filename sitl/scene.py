@@ -45,6 +45,7 @@ __all__ = [
     "random_decorations",
     "random_scene",
     "rug_in_view",
+    "striped_rug",
     "write_video",
     "yaw_sweep",
     "RENDERERS",
@@ -750,14 +751,8 @@ def random_scene(
                 break
     rug = None
     if clutter and rng.random() < 0.5:
-        rug = Rug(
-            float(rng.uniform(room0.x_min + 2, room0.x_max - 1)),
-            float(rng.uniform(room0.y_min + 1, room0.y_max - 1)),
-            float(rng.uniform(10, 80)),
-            float(rng.uniform(1.2, 2.5)),
-            float(rng.uniform(0.8, 1.6)),
-            random_colour(rng, 0.2, 0.6),
-        )
+        rug = striped_rug(rng, float(rng.uniform(room0.x_min + 2, room0.x_max - 1)),
+                          float(rng.uniform(room0.y_min + 1, room0.y_max - 1)))
     room = replace(room0, decorations=random_decorations(rng, room0, clutter), rug=rug)
     scene = Scene(
         room=room,
@@ -784,6 +779,12 @@ def rug_in_view(rng: np.random.Generator, room: Room, cam: Camera) -> Rug:
     margin = 0.6
     x = float(np.clip(cam.x + dist * math.cos(bearing), room.x_min + margin, room.x_max - margin))
     y = float(np.clip(cam.y + dist * math.sin(bearing), room.y_min + margin, room.y_max - margin))
+    return striped_rug(rng, x, y)
+
+
+def striped_rug(rng: np.random.Generator, x: float, y: float) -> Rug:
+    """A striped rug centred at ``x``, ``y`` (metres): turned 10°–80° off the room's axes,
+    1.2–2.5 m × 0.8–1.6 m, its colour drawn (all randomness from ``rng``)."""
     return Rug(x, y, float(rng.uniform(10.0, 80.0)), float(rng.uniform(1.2, 2.5)),
                float(rng.uniform(0.8, 1.6)), random_colour(rng, 0.2, 0.6))
 
