@@ -354,8 +354,10 @@ def run_eval(args) -> int:
         progress.close()
     for line in format_report(report):
         print(line)
-    took = time.perf_counter() - start
-    print(f"({took:.0f} s; companion eval --scenes {args.scenes} --seed {args.seed})")
+    _rerun_line(start, f"companion eval --scenes {args.scenes} --seed {args.seed}"
+                + (f" --width {args.width} --height {args.height}"
+                   if (args.width, args.height) != (640, 480) else "")
+                + (" --no-focal" if args.no_focal else ""), args)
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(report.figures(), f, indent=2)
@@ -366,6 +368,14 @@ def run_eval(args) -> int:
             report.results, "scene", None, args.seed, f"{args.width}×{args.height}",
             reading=reading_of(focal_given=not args.no_focal)))
     return 0
+
+
+def _rerun_line(start: float, command: str, args) -> None:
+    """An eval's closing line: the seconds since ``start`` (``time.perf_counter``) and the
+    command that measures the same again, with the config it ran on, so that figures
+    copied from it carry their command whole."""
+    config = f" --config {args.eval_config}" if args.eval_config else ""
+    print(f"({time.perf_counter() - start:.0f} s; {command}{config})")
 
 
 def _write_frames(path: str, rows: list[dict]) -> None:
@@ -444,16 +454,15 @@ def run_eval_splits(args) -> int:
         figures[renderer] = {s: {cam: rep.figures() for cam, rep in by_cam.items()}
                              for s, by_cam in reports.items()}
         by_renderer[renderer] = reports
-    took = time.perf_counter() - start
-    print(f"({took:.0f} s; companion eval --renderer {args.renderer}"
-          + (f" --split {split}" if split != "all" else "")
-          + (" --focal-given" if args.focal_given else "")
-          + (" --lens-given" if args.lens_given else "")
-          + (" --mirrored" if args.mirrored else "")
-          + (" --eye-level" if args.eye_level else "")
-          + (f" --pitch {args.pitch:g}" if args.pitch else "")
-          + (" --rug" if args.rug else "")
-          + (" --as-video" if args.as_video else "") + ")")
+    _rerun_line(start, f"companion eval --renderer {args.renderer}"
+                + (f" --split {split}" if split != "all" else "")
+                + (" --focal-given" if args.focal_given else "")
+                + (" --lens-given" if args.lens_given else "")
+                + (" --mirrored" if args.mirrored else "")
+                + (" --eye-level" if args.eye_level else "")
+                + (f" --pitch {args.pitch:g}" if args.pitch else "")
+                + (" --rug" if args.rug else "")
+                + (" --as-video" if args.as_video else ""), args)
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)
@@ -495,10 +504,9 @@ def _eval_clips(args, renderers, splits, cfg: Config, start: float) -> int:
                 late = late_frames(fr)
                 figures[renderer][s].update(late_per_frame=clip_figures(late, False),
                                             late_tracked=clip_figures(late, True))
-    print(f"({time.perf_counter() - start:.0f} s; companion eval --renderer {args.renderer}"
-          " --clips" + (" --long" if args.long else "")
-          + (" --mirrored" if args.mirrored else "")
-          + (f" --split {splits[0]})" if len(splits) == 1 else ")"))
+    _rerun_line(start, f"companion eval --renderer {args.renderer} --clips"
+                + (" --long" if args.long else "") + (" --mirrored" if args.mirrored else "")
+                + (f" --split {splits[0]}" if len(splits) == 1 else ""), args)
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump(figures, f, indent=2)
@@ -513,8 +521,8 @@ def _eval_yud_variants(args, cfg: Config, start: float) -> int:
           "photographs and on zoomed and rolled views of them")
     for line in format_variants(errors):
         print(line)
-    print(f"({time.perf_counter() - start:.0f} s; companion eval --yud {args.yud} "
-          f"--split {args.split} --variants)")
+    _rerun_line(start, f"companion eval --yud {args.yud} --split {args.split} --variants",
+                args)
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump({name: [round(area_under_curve(e, th), 2) for th in THRESHOLDS_DEG]
@@ -563,8 +571,8 @@ def run_eval_yud(args) -> int:
               f"{ours.pipeline_ms_per_image:.1f} ms per image, focal given")
     if peer_missing:
         print(f"peer not run: {peer_missing}")
-    print(f"({time.perf_counter() - start:.0f} s; companion eval --yud {args.yud} "
-          f"--split {args.split}" + (" --mirrored" if args.mirrored else "") + ")")
+    _rerun_line(start, f"companion eval --yud {args.yud} --split {args.split}"
+                + (" --mirrored" if args.mirrored else ""), args)
     if args.json:
         with _open_output(args.json, "figures") as f:
             json.dump([r.figures() for r in reports], f, indent=2)

@@ -287,8 +287,14 @@ def test_ctrl_c_keeps_what_was_written(tmp_path):
 
 def test_eval_prints_figures(tmp_path):
     js = tmp_path / "fig.json"
-    r = run("eval", "--scenes", "3", "--workers", "1", "--json", js, timeout=300)
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("vision: {obstacles: {hidden_edge_corners: false}}\n")
+    r = run("eval", "--scenes", "3", "--workers", "1", "--json", js, "--config", cfg,
+            timeout=300)
     assert r.returncode == 0, r.stderr
+    # The closing line is the command that measures the same again, config included.
+    assert r.stdout.splitlines()[-1].endswith(
+        f" s; companion eval --scenes 3 --seed 0 --config {cfg})")
     for name in ("η error median", "detection rate", "false-positive rate", "corner error",
                  "by the rule that read the obstacle driving η"):
         assert name in r.stdout
