@@ -374,8 +374,9 @@ def _rerun_line(start: float, command: str, args) -> None:
     """An eval's closing line: the seconds since ``start`` (``time.perf_counter``) and the
     command that measures the same again, with the config it ran on, so that figures
     copied from it carry their command whole."""
-    config = f" --config {args.eval_config}" if args.eval_config else ""
-    print(f"({time.perf_counter() - start:.0f} s; {command}{config})")
+    from companion.report import closing_line
+
+    print(closing_line(time.perf_counter() - start, command, args.eval_config))
 
 
 def _write_frames(path: str, rows: list[dict]) -> None:

@@ -18,7 +18,7 @@ from companion.vision.geometry import to_pixels
 from companion.vision.pipeline import Estimate
 from companion.vision.vanishing import NONE, V1, V2, V3
 
-__all__ = ["LOG_KEYS", "log_record", "DecisionLog", "annotate", "Summary"]
+__all__ = ["LOG_KEYS", "log_record", "DecisionLog", "annotate", "Summary", "closing_line"]
 
 LOG_KEYS = (
     "frame",
@@ -40,6 +40,13 @@ LOG_KEYS = (
 _LABEL_COLOURS = {V1: (40, 40, 230), V2: (40, 200, 40), V3: (230, 120, 30), NONE: (150, 150, 150)}
 _OBSTACLE = (0, 220, 255)
 _NOISE = (90, 90, 90)  # dropped as noise: darker than the unassigned grey
+
+
+def closing_line(seconds: float, command: str, config: str | None = None) -> str:
+    """The last line an evaluation prints: how long it took and the command that measures
+    the same again, with the config it ran on, so that a figure copied with it carries
+    its whole command: ``(12 s; companion eval … --config c.yaml)``."""
+    return f"({seconds:.0f} s; {command}{f' --config {config}' if config else ''})"
 
 
 def _round(x: float | None, nd: int = 3) -> float | None:

@@ -73,6 +73,7 @@ import numpy as np
 
 from companion.config import Config, MavlinkConfig
 from companion.control.policy import TurnHistory, decide_frame, wrap_deg
+from companion.report import closing_line
 from companion.vision.lens import distort_maps
 from sitl.scene import (
     RENDERERS,
@@ -833,8 +834,13 @@ def simulate_approach(args, progress=None) -> int:
     options += " --no-focal" if args.no_focal else ""
     options += " --eye-level" if args.eye_level else ""
     options += " --manhattan" if args.manhattan else ""
-    print(f"({time.perf_counter() - started:.0f} s; companion sim --scenario approach "
-          f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{options})")
+    if (args.width, args.height) != (640, 480):
+        options += f" --width {args.width} --height {args.height}"
+    options += f" --camera-hz {args.camera_hz:g}" if args.camera_hz != 5.0 else ""
+    options += f" --autopilot {args.autopilot}" if args.autopilot else ""
+    print(closing_line(time.perf_counter() - started, "companion sim --scenario approach "
+                       f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{options}",
+                       args.sim_config))
     for r in summary["per_run"]:
         if r["outcome"] == "error":
             print(f"run {r['run']}: error: {r['detail']}")

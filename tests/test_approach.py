@@ -195,13 +195,19 @@ def test_a_run_starts_to_fly_the_same_way_every_time(monkeypatch):
         assert a == b, parted[:1] or "lengths differ"
 
 
-def test_the_pipeline_flies_past_and_the_figures_are_written(tmp_path):
+def test_the_pipeline_flies_past_and_the_figures_are_written(tmp_path, capsys):
     out = tmp_path / "paper.json"
     plot = tmp_path / "paper.png"
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("policy: {max_turn_deg: 30.0}\n")  # the default, written out
     code = main(["sim", "--scenario", "approach", "--runs", "3", "--seed", "0",
                  "--policy", "paper", "--speed", "0.6", "--json", str(out), "--plot",
-                 str(plot)])
+                 str(plot), "--config", str(cfg)])
     assert code == 0
+    # The closing line is the command that flies the same again, config included.
+    closing = [line for line in capsys.readouterr().out.splitlines() if line.startswith("(")]
+    assert closing[-1].endswith(" s; companion sim --scenario approach --runs 3 --seed 0 "
+                                f"--policy paper --speed 0.6 --config {cfg})"), closing
     figures = json.loads(out.read_text())
     for key in ("scenario", "policy", "runs", "passed", "collisions", "timeouts",
                 "collision_free_rate", "per_run"):
