@@ -27,6 +27,7 @@ from companion.vision._geometry cimport (
 cdef double INF = float("inf")
 cdef double MIN_SIDE = sin(radians(20.0))  # a leg leaves its vertical edge at 20° or more
 cdef double MIN_TOP_SPAN = 0.5  # a top's outermost hanging edges span half of it or more
+cdef double FACE_CORE = 0.6  # a face's middle: its outline shrunk to this about its centre
 
 # The rules an obstacle hypothesis comes from, in find_obstacles' order (a diagnosis: which
 # rule read each detection and each false alarm).
@@ -866,7 +867,9 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
     the two OVPs is no such proof: near the horizon the box's own top edges are labelled
     so. At a junction below the unseen edge, its legs leave toward either side of it
     (:func:`foot_legs_apart`, the edge rising from the junction as the seen one rises from
-    the leg's far end). Per junction, its first such pair."""
+    the leg's far end). The face read, between the seen edge and the junction, is opaque:
+    a room edge seen in its middle (:func:`room_edge_inside`) is behind no face. Per
+    junction, its first such pair."""
     cdef double d1[3]
     cdef double d2[3]
     cdef double o1[3]
@@ -874,6 +877,7 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
     cdef double ortho, ex, ey
     cdef Py_ssize_t a, b, leg, end, k
     cdef Hypothesis* h
+    cdef double* face_ovp
     if not junctions or not edges:
         return
     # For each free leg, the vertical edges it leaves from: (chain, which end).
@@ -907,6 +911,12 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                     continue
                 if room_edge_at(s, lengths, chain, room_idx, o1, o2, p):
                     continue
+                face_ovp = o1  # the OVP of the face the leg bounds
+                if leg == b:
+                    face_ovp = o2
+                if room_edge_inside(fr, s, lengths, room_idx, x, y, ex, ey,
+                                    chain[2 - 2 * end], chain[3 - 2 * end], face_ovp, p):
+                    continue
                 h = new_hypothesis(found, HIDDEN_EDGE)
                 set_ovps(h, d1, d2, ortho, chain[4])
                 h.legs[0], h.legs[1] = a, b
@@ -919,6 +929,61 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
             else:
                 continue
             break
+
+
+cdef bint room_edge_inside(Frame* fr, double[:, ::1] s, double[::1] lengths,
+                           Py_ssize_t[::1] room_idx, double jx, double jy, double nx,
+                           double ny, double fx, double fy, const double* ovp,
+                           Params* p) noexcept:
+    """Whether a room edge (``room_idx``, ``min_edge_px`` or longer) has its midpoint in
+    the middle of a face: the face between a corner's unseen vertical edge at the junction
+    (jx, jy) and the seen edge from (nx, ny), where the leg from the junction meets it, to
+    (fx, fy); its edge through (fx, fy) runs toward the leg's OVP ``ovp`` (homogeneous
+    pixels) to the unseen edge's line through V3. The outline shrunk to ``FACE_CORE`` about
+    its centre keeps clear of the face's own edges, which near the horizon may be labelled
+    V1 or V2. A face hides what stands behind it; a rug's side running to an aligned
+    piece's leg is read as such a face with the floor's and the walls' lines showing in
+    it."""
+    cdef double pt[3]
+    cdef double top[3]
+    cdef double unseen[3]
+    cdef double corner[3]
+    cdef double v3[3]
+    cdef double qx[4]
+    cdef double qy[4]
+    cdef double mx, my, px, py, cross
+    cdef int i, sign
+    cdef Py_ssize_t j, k
+    pixel_point(fr.f, fr.cx, fr.cy, fr.d3, v3)
+    pt[0], pt[1], pt[2] = fx, fy, 1.0
+    cross3(pt, ovp, top)
+    pt[0], pt[1], pt[2] = jx, jy, 1.0
+    cross3(pt, v3, unseen)
+    cross3(top, unseen, corner)
+    if fabs(corner[2]) < 1e-12:
+        return False
+    qx[0], qx[1], qx[2], qx[3] = jx, nx, fx, corner[0] / corner[2]
+    qy[0], qy[1], qy[2], qy[3] = jy, ny, fy, corner[1] / corner[2]
+    mx = (qx[0] + qx[1] + qx[2] + qx[3]) / 4
+    my = (qy[0] + qy[1] + qy[2] + qy[3]) / 4
+    for i in range(4):
+        qx[i] = mx + FACE_CORE * (qx[i] - mx)
+        qy[i] = my + FACE_CORE * (qy[i] - my)
+    for j in range(room_idx.shape[0]):
+        k = room_idx[j]
+        if lengths[k] < p.min_edge_px:
+            continue
+        px, py = (s[k, 0] + s[k, 2]) / 2, (s[k, 1] + s[k, 3]) / 2
+        sign = 0
+        for i in range(4):
+            cross = ((qx[(i + 1) % 4] - qx[i]) * (py - qy[i])
+                     - (qy[(i + 1) % 4] - qy[i]) * (px - qx[i]))
+            if cross == 0 or (sign != 0 and (cross > 0) != (sign > 0)):
+                break
+            sign = 1 if cross > 0 else -1
+        else:
+            return True
+    return False
 
 
 cdef bint room_edge_at(double[:, ::1] s, double[::1] lengths, tuple chain,
