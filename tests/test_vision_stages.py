@@ -766,6 +766,29 @@ def test_a_rug_corner_beside_the_corner_of_a_manhattan_thing_is_no_box():
     assert len(found([*top, *top_front], V1)) == 1
 
 
+def test_a_room_edge_seen_through_the_face_read_is_no_box():
+    # The face the rule reads, between the unseen corner and the outline edge, is opaque:
+    # a rug's side running to an aligned piece's leg reads as that face, with the floor's
+    # or a wall's lines showing in its middle. The same line outside the face, or along
+    # its own edges (near the horizon a box's top edge may be labelled V1), changes nothing.
+    from companion.vision.obstacles import find_obstacles
+
+    segs, labels, (u, _) = _bottom_of_box_with_unseen_front_edge()
+    front, up = np.array([0.2, 1.2, 4.0]), np.array([0.0, -0.9, 0.0])
+    middle = _project([front + 0.4 * u + up / 2])[0]
+
+    def found(line):
+        more = np.vstack([segs, line])
+        lab = np.append(labels, V1)
+        return find_obstacles(more, find_corners(more, lab), _room_layout(), lab == NONE, lab)
+
+    assert found([*(middle - [15.0, 0.0]), *(middle + [15.0, 0.0])]) == []
+    top_edge = _project([front + 0.25 * u + up, front + 0.55 * u + up])
+    assert len(found(top_edge.ravel())) == 1
+    above = middle - [0.0, 90.0]
+    assert len(found([*(above - [15.0, 0.0]), *(above + [15.0, 0.0])])) == 1
+
+
 def test_an_outline_edge_whose_foot_stops_short_still_meets_its_leg():
     # The box above, its outline edge dimmed at the foot by the box's own contact shadow:
     # the detector stops it short of the bottom edge that runs on to the hidden corner.
