@@ -959,8 +959,7 @@ cdef bint room_edge_inside(Frame* fr, double[:, ::1] s, double[::1] lengths,
     cross3(pt, ovp, top)
     pt[0], pt[1], pt[2] = jx, jy, 1.0
     cross3(pt, v3, unseen)
-    cross3(top, unseen, corner)
-    if fabs(corner[2]) < 1e-12:
+    if not intersect(top, unseen, corner) or fabs(corner[2]) < 1e-12:
         return False
     qx[0], qx[1], qx[2], qx[3] = jx, nx, fx, corner[0] / corner[2]
     qy[0], qy[1], qy[2], qy[3] = jy, ny, fy, corner[1] / corner[2]
