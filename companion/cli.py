@@ -22,7 +22,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from companion.capture import CaptureError, ImageFolder, is_camera, open_recording
-from companion.config import Config, ConfigError, load_config
+from companion.config import CameraConfig, Config, ConfigError, load_config
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -76,8 +76,8 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("--scenes", type=int, default=200, help="number of scenes (default 200)")
     ev.add_argument("--seed", type=int, default=0, help="seed of the scene set (default 0)")
     ev.add_argument("--config", metavar="PATH", dest="eval_config", help="YAML config")
-    ev.add_argument("--width", type=int, default=640)
-    ev.add_argument("--height", type=int, default=480)
+    ev.add_argument("--width", type=int, default=CameraConfig.width)
+    ev.add_argument("--height", type=int, default=CameraConfig.height)
     ev.add_argument(
         "--no-focal",
         action="store_true",
@@ -356,7 +356,8 @@ def run_eval(args) -> int:
         print(line)
     _rerun_line(start, f"companion eval --scenes {args.scenes} --seed {args.seed}"
                 + (f" --width {args.width} --height {args.height}"
-                   if (args.width, args.height) != (640, 480) else "")
+                   if (args.width, args.height) != (CameraConfig.width, CameraConfig.height)
+                   else "")
                 + (" --no-focal" if args.no_focal else ""), args)
     if args.json:
         with _open_output(args.json, "figures") as f:

@@ -71,7 +71,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from companion.config import Config, MavlinkConfig
+from companion.config import CameraConfig, Config, MavlinkConfig
 from companion.control.policy import TurnHistory, decide_frame, wrap_deg
 from companion.report import closing_line
 from companion.vision.lens import distort_maps
@@ -93,6 +93,8 @@ __all__ = ["Approach", "RunResult", "draw_approach", "fly_approach", "first_cont
            "format_report", "run_approaches", "summarize", "write_trajectories"]
 
 POLICIES = ("paper", "none", "oracle")
+CAMERA_HZ = 5.0
+"""camera frames per second of flight, unless ``--camera-hz`` says otherwise"""
 BODY_RADIUS_M = 0.25
 BODY_HALF_HEIGHT_M = 0.1  # frame, props and camera: 0.2 m from the skids to the props' tips
 PASS_MARGIN_M = 1.0
@@ -379,7 +381,7 @@ def _policy_config(base: Config, ap: Approach, camera: Camera, focal_given: bool
 
 
 def fly_approach(ap: Approach, policy: str = "paper", *, port: int | None = None,
-                 autopilot_url: str | None = None, camera_hz: float = 5.0, width: int = 640,
+                 autopilot_url: str | None = None, camera_hz: float = CAMERA_HZ, width: int = 640,
                  height: int = 480, base: Config | None = None, focal_given: bool = True,
                  lens_k1: float = 0.0, renderer: str = "scene", spp: int = 8) -> RunResult:
     """Fly one drawn approach; against the lock-step mock on 127.0.0.1:``port``, or, with
@@ -834,9 +836,9 @@ def simulate_approach(args, progress=None) -> int:
     options += " --no-focal" if args.no_focal else ""
     options += " --eye-level" if args.eye_level else ""
     options += " --manhattan" if args.manhattan else ""
-    if (args.width, args.height) != (640, 480):
+    if (args.width, args.height) != (CameraConfig.width, CameraConfig.height):
         options += f" --width {args.width} --height {args.height}"
-    options += f" --camera-hz {args.camera_hz:g}" if args.camera_hz != 5.0 else ""
+    options += f" --camera-hz {args.camera_hz:g}" if args.camera_hz != CAMERA_HZ else ""
     options += f" --autopilot {args.autopilot}" if args.autopilot else ""
     print(closing_line(time.perf_counter() - started, "companion sim --scenario approach "
                        f"--runs {args.runs} --seed {args.seed} --policy {args.policy}{options}",

@@ -34,10 +34,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from companion.config import Config, MavlinkConfig
+from companion.config import CameraConfig, Config, MavlinkConfig
 from companion.control.offboard import OffboardController, SentSetpoint
 from companion.control.policy import TurnHistory, decide_frame
 from companion.vision.pipeline import Pipeline
+from sitl.approach import CAMERA_HZ
 from sitl.scene import (
     EAST,
     NORTH,
@@ -444,8 +445,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--plot", metavar="PATH",
                     help="PNG: turn, η and yaw rate over time (default "
                          "out/closed_loop.png); approach, the runs' top-down trajectories")
-    ap.add_argument("--width", type=int, default=640)
-    ap.add_argument("--height", type=int, default=480)
+    ap.add_argument("--width", type=int, default=CameraConfig.width)
+    ap.add_argument("--height", type=int, default=CameraConfig.height)
     ap.add_argument("--port", type=int, default=14561,
                     help="turn: UDP port on 127.0.0.1 for the MAVLink link (default 14561; "
                          "approach picks a free port per run)")
@@ -457,8 +458,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--autopilot", metavar="URL",
                     help="approach: fly an autopilot that is already running (e.g. PX4 SITL: "
                          "udpin://127.0.0.1:14540) in real time instead of the mock")
-    ap.add_argument("--camera-hz", type=float, default=5.0,
-                    help="approach: camera frames per second of flight (default 5)")
+    ap.add_argument("--camera-hz", type=float, default=CAMERA_HZ,
+                    help=f"approach: camera frames per second of flight (default {CAMERA_HZ:g})")
     ap.add_argument("--workers", type=int, default=2,
                     help="approach: runs side by side against the mock (default 2)")
     ap.add_argument("--no-focal", action="store_true",
