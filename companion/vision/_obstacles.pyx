@@ -853,7 +853,8 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] s, double[::1]
 
 cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                               double[::1] lengths, list edges, list junctions,
-                              Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
+                              Py_ssize_t[::1] room_idx, const double* v3_px,
+                              Hypotheses* found) except *:
     """Two legs meeting at a junction where no vertical edge shows, one of them running on
     to a vertical edge at its far end: the near corner of a box whose two faces are lit
     alike, and the box's outline edge. Each leg's OVP is where it crosses the horizon, as
@@ -914,8 +915,8 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                 face_ovp = o1  # the OVP of the face the leg bounds
                 if leg == b:
                     face_ovp = o2
-                if room_edge_inside(fr, s, lengths, room_idx, x, y, ex, ey,
-                                    chain[2 - 2 * end], chain[3 - 2 * end], face_ovp, p):
+                if room_edge_inside(s, lengths, room_idx, x, y, ex, ey, chain[2 - 2 * end],
+                                    chain[3 - 2 * end], face_ovp, v3_px, p):
                     continue
                 h = new_hypothesis(found, HIDDEN_EDGE)
                 set_ovps(h, d1, d2, ortho, chain[4])
@@ -931,15 +932,14 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
             break
 
 
-cdef bint room_edge_inside(Frame* fr, double[:, ::1] s, double[::1] lengths,
-                           Py_ssize_t[::1] room_idx, double jx, double jy, double nx,
-                           double ny, double fx, double fy, const double* ovp,
-                           Params* p) noexcept:
+cdef bint room_edge_inside(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1] room_idx,
+                           double jx, double jy, double nx, double ny, double fx, double fy,
+                           const double* ovp, const double* v3_px, Params* p) noexcept:
     """Whether a room edge (``room_idx``, ``min_edge_px`` or longer) has its midpoint in
     the middle of a face: the face between a corner's unseen vertical edge at the junction
     (jx, jy) and the seen edge from (nx, ny), where the leg from the junction meets it, to
     (fx, fy); its edge through (fx, fy) runs toward the leg's OVP ``ovp`` (homogeneous
-    pixels) to the unseen edge's line through V3. The outline shrunk to ``FACE_CORE`` about
+    pixels) to the unseen edge's line through V3 (``v3_px``, homogeneous). The outline shrunk to ``FACE_CORE`` about
     its centre keeps clear of the face's own edges, which near the horizon may be labelled
     V1 or V2. A face hides what stands behind it; a rug's side running to an aligned
     piece's leg is read as such a face with the floor's and the walls' lines showing in
@@ -948,17 +948,15 @@ cdef bint room_edge_inside(Frame* fr, double[:, ::1] s, double[::1] lengths,
     cdef double top[3]
     cdef double unseen[3]
     cdef double corner[3]
-    cdef double v3[3]
     cdef double qx[4]
     cdef double qy[4]
     cdef double mx, my, px, py, cross
     cdef int i, sign
     cdef Py_ssize_t j, k
-    pixel_point(fr.f, fr.cx, fr.cy, fr.d3, v3)
     pt[0], pt[1], pt[2] = fx, fy, 1.0
     cross3(pt, ovp, top)
     pt[0], pt[1], pt[2] = jx, jy, 1.0
-    cross3(pt, v3, unseen)
+    cross3(pt, v3_px, unseen)
     if not intersect(top, unseen, corner) or fabs(corner[2]) < 1e-12:
         return False
     qx[0], qx[1], qx[2], qx[3] = jx, nx, fx, corner[0] / corner[2]
@@ -1800,7 +1798,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
         if p.hidden_edge_corners:
             junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx,
-                                &found)
+                                &vps[2, 0], &found)
         if room_seen:
             single_halves(&fr, &p, &halves, &found)
             hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
