@@ -1494,7 +1494,8 @@ cdef void receding_top_legs(Frame* fr, Params* p, double[:, ::1] s, tuple top,
 
 cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                         double[::1] lengths, Py_ssize_t[::1] free_idx, list chains,
-                        Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
+                        Py_ssize_t[::1] room_idx, const double* v3_px,
+                        Hypotheses* found) except *:
     """One face's top edge with vertical edges hanging from it: a table's top seen from
     the front with its legs under the top's front edge, a box whose receding edges are
     too foreshortened to show, or a box taller than the camera seen from below its top;
@@ -1547,19 +1548,20 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
             if at_foot and mid <= 0 or alone and noisy:
                 continue
             face_outline(fr, p, s, lines, lengths, chains, room_idx, top, o, d1, d2,
-                         at_foot, alone, free_idx, found)
+                         at_foot, alone, free_idx, v3_px, found)
 
 
 cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                        double[::1] lengths, list chains, Py_ssize_t[::1] room_idx, tuple edge,
                        const double* o, const double* d1, const double* d2, bint at_foot,
-                       bint alone, Py_ssize_t[::1] free_idx, Hypotheses* found) except *:
+                       bint alone, Py_ssize_t[::1] free_idx, const double* v3_px,
+                       Hypotheses* found) except *:
     """One hypothesis for :func:`hanging_faces`, appended to ``found``: a face from its
     horizontal ``edge`` (an :func:`edge_chains` chain whose OVP is the direction ``d1``,
     the pixel point ``o``, ``d2`` at a right angle to it) and the vertical edges ``chains``
     whose upper ends (``at_foot``: lower ends) lie on its line, between its ends: two or
     more, one on each side of its middle (the edges of one face, not one edge twice), each
-    upright (at ``MIN_SIDE`` or more from the face's edge, pointing at V3 within
+    upright (at ``MIN_SIDE`` or more from the face's edge, pointing at V3, ``v3_px``, within
     ``member_angle_deg``), the outermost two spanning at least ``MIN_TOP_SPAN`` of a top's
     length.
 
@@ -1587,9 +1589,7 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
     # A foot's ends reach as far as edge_chains joins a piece: the detector stops a foot
     # short of the face's corner, in the shadow where face and floor meet.
     reach = p.radius_px + (p.leg_gap_frac * (t1 - t0) if at_foot else 0.0)
-    cdef double v3[3]
     cdef double max_lean = sin(radians(p.member_angle_deg))
-    pixel_point(fr.f, fr.cx, fr.cy, fr.d3, v3)
     lo, hi, tallest = INF, -INF, 0.0
     ends = []
     cdef int upright = 0
@@ -1611,7 +1611,7 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
         # Counted only if upright: not along the face's edge, and not a line on the floor
         # aimed near V3 (a rug's stripe); the room-edge test below takes every one.
         if (fabs((chain[2] - chain[0]) * uy - (chain[3] - chain[1]) * ux) < MIN_SIDE * chain[4]
-                or vp_sin(chain[0], chain[1], chain[2], chain[3], v3) > max_lean):
+                or vp_sin(chain[0], chain[1], chain[2], chain[3], v3_px) > max_lean):
             continue
         if at_foot:  # where the edge's line meets the foot: the floor contact
             b = chain[5]
@@ -1801,7 +1801,8 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                                 &vps[2, 0], &found)
         if room_seen:
             single_halves(&fr, &p, &halves, &found)
-            hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
+            hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &vps[2, 0],
+                          &found)
         return kept_obstacles(&fr, &p, s, lines, &found, pc, cs, cn, &vps[2, 0])
     finally:
         free(found.items)
