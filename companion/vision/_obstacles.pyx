@@ -939,11 +939,11 @@ cdef bint room_edge_inside(double[:, ::1] s, double[::1] lengths, Py_ssize_t[::1
     the middle of a face: the face between a corner's unseen vertical edge at the junction
     (jx, jy) and the seen edge from (nx, ny), where the leg from the junction meets it, to
     (fx, fy); its edge through (fx, fy) runs toward the leg's OVP ``ovp`` (homogeneous
-    pixels) to the unseen edge's line through V3 (``v3_px``, homogeneous). The outline shrunk to ``FACE_CORE`` about
-    its centre keeps clear of the face's own edges, which near the horizon may be labelled
-    V1 or V2. A face hides what stands behind it; a rug's side running to an aligned
-    piece's leg is read as such a face with the floor's and the walls' lines showing in
-    it."""
+    pixels) to the unseen edge's line through V3 (``v3_px``, homogeneous). The outline
+    shrunk to ``FACE_CORE`` about its centre keeps clear of the face's own edges, which
+    near the horizon may be labelled V1 or V2. A face hides what stands behind it; a rug's
+    side running to an aligned piece's leg is read as such a face with the floor's and the
+    walls' lines showing in it."""
     cdef double pt[3]
     cdef double top[3]
     cdef double unseen[3]
