@@ -65,6 +65,7 @@ cdef struct Frame:
     double cx
     double cy
     double d3[3]
+    double v3[3]  # V3 as the layout gives it (homogeneous pixels), d3 its direction
     double horizon[3]
     double l1[3]
     double l2[3]
@@ -114,6 +115,13 @@ cdef inline void direction_of(Frame* fr, const double* p, double* out) noexcept 
     out[1] = p[1] - fr.cy * p[2]
     out[2] = fr.f * p[2]
     unit3(out)
+
+
+cdef inline void set_v3(Frame* fr, const double* v3) noexcept nogil:
+    """The frame's V3: ``v3`` (homogeneous pixels, as the layout gives it) and its
+    direction; ``fr``'s focal length and principal point set first."""
+    fr.v3[0], fr.v3[1], fr.v3[2] = v3[0], v3[1], v3[2]
+    direction_of(fr, v3, fr.d3)
 
 
 cdef inline bint intersect(const double* a, const double* b, double* out) noexcept nogil:
@@ -853,8 +861,7 @@ cdef void edge_horizon_pairs(Frame* fr, Params* p, double[:, ::1] s, double[::1]
 
 cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                               double[::1] lengths, list edges, list junctions,
-                              Py_ssize_t[::1] room_idx, const double* v3_px,
-                              Hypotheses* found) except *:
+                              Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
     """Two legs meeting at a junction where no vertical edge shows, one of them running on
     to a vertical edge at its far end: the near corner of a box whose two faces are lit
     alike, and the box's outline edge. Each leg's OVP is where it crosses the horizon, as
@@ -916,7 +923,7 @@ cdef void junction_edge_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, 
                 if leg == b:
                     face_ovp = o2
                 if room_edge_inside(s, lengths, room_idx, x, y, ex, ey, chain[2 - 2 * end],
-                                    chain[3 - 2 * end], face_ovp, v3_px, p):
+                                    chain[3 - 2 * end], face_ovp, fr.v3, p):
                     continue
                 h = new_hypothesis(found, HIDDEN_EDGE)
                 set_ovps(h, d1, d2, ortho, chain[4])
@@ -1064,7 +1071,7 @@ cdef list leg_junctions(double[:, ::1] s, double[:, ::1] lines, double[::1] leng
 
 
 cdef void junction_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
-                         list junctions, const double* v3_px, Hypotheses* found) except *:
+                         list junctions, Hypotheses* found) except *:
     """Two leg junctions one above the other along V3: the top and bottom corners of a
     vertical edge the detector did not see (both faces alike), the paper's pair (eqs. 6–8)
     with L_r implied. At each junction one leg must leave toward each side of the edge;
@@ -1085,7 +1092,7 @@ cdef void junction_pairs(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] 
         xa, ya, a1, a2 = junctions[i]
         ja[0], ja[1], ja[2] = xa, ya, 1.0
         # The vertical line through this junction (toward V3), in pixel distances.
-        cross3(ja, v3_px, vline)
+        cross3(ja, fr.v3, vline)
         length = hypot(vline[0], vline[1])
         if length <= 0:
             continue
@@ -1313,7 +1320,7 @@ def fit_box_ovps(segments, ovps, layout_vps, double focal, double cx, double cy,
         segment_line(s[i, 0], s[i, 1], s[i, 2], s[i, 3], &lines[i, 0])
     cdef Frame fr
     fr.f, fr.cx, fr.cy = focal, cx, cy
-    direction_of(&fr, &vps[2, 0], fr.d3)
+    set_v3(&fr, &vps[2, 0])
     if not box_ovps_fit(&fr, s, lines, list(range(s.shape[0])),
                         sin(radians(max_angle_deg)), &out[0, 0], &out[1, 0]):
         return None
@@ -1345,14 +1352,14 @@ def edge_on_angle(corners_px, ovps, layout_vps, double focal, double cx, double 
     cdef double[:, ::1] vps = np.ascontiguousarray(layout_vps, dtype=float).reshape(3, 3)
     cdef Frame fr
     fr.f, fr.cx, fr.cy = focal, cx, cy
-    direction_of(&fr, &vps[2, 0], fr.d3)
+    set_v3(&fr, &vps[2, 0])
     return edge_on_worst(&fr, np.ascontiguousarray(corners_px, dtype=float).reshape(-1, 2),
                          np.ascontiguousarray(ovps, dtype=float).reshape(-1, 3))
 
 
 cdef list kept_obstacles(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                          Hypotheses* found, double[:, ::1] pc, long long[::1] cs,
-                         long long[::1] cn, const double* v3_px):
+                         long long[::1] cn):
     """The obstacles of the hypotheses in ``found``, grouped by their OVPs
     (:func:`group_by_ovps`, :func:`obstacle`), less those edge-on at every corner: a line
     on the floor aimed at the camera's foot (:func:`edge_on_worst`)."""
@@ -1360,7 +1367,7 @@ cdef list kept_obstacles(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] 
     if found.count == 0:
         return obstacles
     for members in group_by_ovps(found, p.merge_deg):
-        o = obstacle(fr, p, s, lines, members, found, pc, cs, cn, v3_px)
+        o = obstacle(fr, p, s, lines, members, found, pc, cs, cn)
         if edge_on_worst(fr, o[1], o[0]) >= p.edge_on_deg:
             obstacles.append(o)
     return obstacles
@@ -1368,7 +1375,7 @@ cdef list kept_obstacles(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] 
 
 cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                     list members, Hypotheses* found, double[:, ::1] pc, long long[::1] cs,
-                    long long[::1] cn, const double* v3_px):
+                    long long[::1] cn):
     """One obstacle from a group of hypotheses: OVPs refit on all legs, member corners
     joined. Returns (ovps 3×3, corners_px K×2, pairs, height_px, λ3, rule): ``rule`` the
     name (:data:`RULES`) of the rule that made the group's first hypothesis."""
@@ -1437,7 +1444,7 @@ cdef tuple obstacle(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines
         if all(hypot(x - kx, y - ky) > 3.0 for kx, ky in points):
             points.append((x, y))
     ovps = np.array([[o1[0], o1[1], o1[2]], [o2[0], o2[1], o2[2]],
-                     [v3_px[0], v3_px[1], v3_px[2]]])
+                     [fr.v3[0], fr.v3[1], fr.v3[2]]])
     return (ovps, np.array(points, dtype=float).reshape(-1, 2), len(members), height, lam3,
             RULES[first.rule])
 
@@ -1494,8 +1501,7 @@ cdef void receding_top_legs(Frame* fr, Params* p, double[:, ::1] s, tuple top,
 
 cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                         double[::1] lengths, Py_ssize_t[::1] free_idx, list chains,
-                        Py_ssize_t[::1] room_idx, const double* v3_px,
-                        Hypotheses* found) except *:
+                        Py_ssize_t[::1] room_idx, Hypotheses* found) except *:
     """One face's top edge with vertical edges hanging from it: a table's top seen from
     the front with its legs under the top's front edge, a box whose receding edges are
     too foreshortened to show, or a box taller than the camera seen from below its top;
@@ -1548,20 +1554,19 @@ cdef void hanging_faces(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] l
             if at_foot and mid <= 0 or alone and noisy:
                 continue
             face_outline(fr, p, s, lines, lengths, chains, room_idx, top, o, d1, d2,
-                         at_foot, alone, free_idx, v3_px, found)
+                         at_foot, alone, free_idx, found)
 
 
 cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] lines,
                        double[::1] lengths, list chains, Py_ssize_t[::1] room_idx, tuple edge,
                        const double* o, const double* d1, const double* d2, bint at_foot,
-                       bint alone, Py_ssize_t[::1] free_idx, const double* v3_px,
-                       Hypotheses* found) except *:
+                       bint alone, Py_ssize_t[::1] free_idx, Hypotheses* found) except *:
     """One hypothesis for :func:`hanging_faces`, appended to ``found``: a face from its
     horizontal ``edge`` (an :func:`edge_chains` chain whose OVP is the direction ``d1``,
     the pixel point ``o``, ``d2`` at a right angle to it) and the vertical edges ``chains``
     whose upper ends (``at_foot``: lower ends) lie on its line, between its ends: two or
     more, one on each side of its middle (the edges of one face, not one edge twice), each
-    upright (at ``MIN_SIDE`` or more from the face's edge, pointing at V3, ``v3_px``, within
+    upright (at ``MIN_SIDE`` or more from the face's edge, pointing at V3, ``fr.v3``, within
     ``member_angle_deg``), the outermost two spanning at least ``MIN_TOP_SPAN`` of a top's
     length.
 
@@ -1611,7 +1616,7 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
         # Counted only if upright: not along the face's edge, and not a line on the floor
         # aimed near V3 (a rug's stripe); the room-edge test below takes every one.
         if (fabs((chain[2] - chain[0]) * uy - (chain[3] - chain[1]) * ux) < MIN_SIDE * chain[4]
-                or vp_sin(chain[0], chain[1], chain[2], chain[3], v3_px) > max_lean):
+                or vp_sin(chain[0], chain[1], chain[2], chain[3], fr.v3) > max_lean):
             continue
         if at_foot:  # where the edge's line meets the foot: the floor contact
             b = chain[5]
@@ -1699,7 +1704,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         lengths[i] = hypot(s[i, 2] - s[i, 0], s[i, 3] - s[i, 1])
     cdef Frame fr
     fr.f, fr.cx, fr.cy = focal, cx, cy
-    direction_of(&fr, &vps[2, 0], fr.d3)
+    set_v3(&fr, &vps[2, 0])
     direction_of(&fr, &vps[0, 0], fr.l1)
     direction_of(&fr, &vps[1, 0], fr.l2)
     # The horizon: the image line of all directions ⟂ V3, scaled to pixel distances.
@@ -1781,7 +1786,7 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
                 h.corner = g
         # Vertical edges the detector did not see, implied by leg junctions above each other.
         junctions = leg_junctions(s, lines, lengths, free_idx, min_leg_sin, &p)
-        junction_pairs(&fr, &p, s, lines, junctions, &vps[2, 0], &found)
+        junction_pairs(&fr, &p, s, lines, junctions, &found)
         # Vertical edges whose ends show only two-leg corners (outline edges, low contrast).
         chains = edge_chains(s, lengths, lines, verticals, &p)
         edges = edge_legs(&fr, s, lengths, chains, free_idx, room_idx, &p)
@@ -1791,19 +1796,18 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
         # their hypotheses are grouped together: the obstacle that drives η is then chosen
         # among all of them (find_obstacles' order), not taken from the first rule that
         # found anything, which may be a weaker rule's wrong reading of another piece.
-        obstacles = kept_obstacles(&fr, &p, s, lines, &found, pc, cs, cn, &vps[2, 0])
+        obstacles = kept_obstacles(&fr, &p, s, lines, &found, pc, cs, cn)
         if obstacles:
             return obstacles
         found.count = 0
         edge_horizon_pairs(&fr, &p, s, lengths, lines, edges, manhattan_idx, &found)
         if p.hidden_edge_corners:
             junction_edge_pairs(&fr, &p, s, lines, lengths, edges, junctions, room_idx,
-                                &vps[2, 0], &found)
+                                &found)
         if room_seen:
             single_halves(&fr, &p, &halves, &found)
-            hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &vps[2, 0],
-                          &found)
-        return kept_obstacles(&fr, &p, s, lines, &found, pc, cs, cn, &vps[2, 0])
+            hanging_faces(&fr, &p, s, lines, lengths, free_idx, chains, room_idx, &found)
+        return kept_obstacles(&fr, &p, s, lines, &found, pc, cs, cn)
     finally:
         free(found.items)
         free(halves.items)
