@@ -880,13 +880,18 @@ def test_a_lone_face_needs_a_room_that_vouches_for_the_focal_length():
     segs, _, _ = _face_of_rotated_box()
     labels = np.array([V3, V3, NONE, NONE])
 
-    def found(v2_skew_deg, v2_seen=True):
+    def found(v2_skew_deg, v2_seen=True, focal_settled=False):
         layout = _room_layout(v2_skew_deg=v2_skew_deg, v2_seen=v2_seen)
-        return find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE, labels)
+        return find_obstacles(segs, find_corners(segs, labels), layout, labels == NONE, labels,
+                              focal_settled=focal_settled)
 
     assert len(found(0.0)) == 1  # V2 straight ahead, V1 to the side: a right angle
     assert found(-5.0) == []  # 85° apart with this focal length: it is not to be trusted
     assert found(0.0, v2_seen=False) == []  # V2 inferred from V1, which proves nothing
+    # A video's settled focal length is the median of many frames': 5° off a right angle
+    # is then this frame's VP noise (settled_focal_tol_deg, 6°), 8° still too much.
+    assert len(found(-5.0, focal_settled=True)) == 1
+    assert found(-8.0, focal_settled=True) == []
 
 
 def _rug_aimed_at_the_camera(x=0.6, width=1.0):

@@ -46,6 +46,7 @@ cdef struct Params:
     double single_corner_orthogonal_tol_deg
     double single_corner_noise_deg
     double single_face_tol_deg
+    double room_right_angle_tol_deg  # single_face_tol_deg, or settled_focal_tol_deg
     double non_manhattan_min_deg
     double merge_deg
     double member_angle_deg
@@ -190,9 +191,10 @@ cdef inline bint off_layout(Frame* fr, Params* p, const double* d) noexcept nogi
 
 cdef inline bint room_vouches_for_focal(Frame* fr, Params* p) noexcept nogil:
     """Whether the room's V1 and V2 are at a right angle within ``single_face_tol_deg``
-    under the focal length: a face's other OVP taken at a right angle through it is then
-    trusted (a wrong focal length shows there)."""
-    return fabs(90.0 - angle_between_deg(fr.l1, fr.l2)) <= p.single_face_tol_deg
+    (``settled_focal_tol_deg`` under a video's settled focal length) under the focal
+    length: a face's other OVP taken at a right angle through it is then trusted (a wrong
+    focal length shows there)."""
+    return fabs(90.0 - angle_between_deg(fr.l1, fr.l2)) <= p.room_right_angle_tol_deg
 
 
 cdef inline bint box_ovps(Frame* fr, Params* p, const double* d1, const double* d2,
@@ -1668,7 +1670,7 @@ cdef void face_outline(Frame* fr, Params* p, double[:, ::1] s, double[:, ::1] li
 def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, double focal,
          double cx, double cy, free_legs, labels, Py_ssize_t vertical_label, params,
          double radius_px, double leg_gap_frac, double min_leg_sin, bint room_seen,
-         double noise_px):
+         double noise_px, bint focal_settled=False):
     """Obstacles from Table-I corners and vertical edges (see
     :func:`companion.vision.obstacles.find_obstacles`), unsorted: a list of (ovps 3×3,
     corners_px K×2, pairs, height_px, λ3, rule). The fewer-corner rules run, all of them,
@@ -1682,6 +1684,8 @@ def find(segments, corner_points, corner_s, corner_n, corner_r, layout_vps, doub
     p.single_corner_orthogonal_tol_deg = params.single_corner_orthogonal_tol_deg
     p.single_corner_noise_deg = params.single_corner_noise_deg
     p.single_face_tol_deg = params.single_face_tol_deg
+    p.room_right_angle_tol_deg = (params.settled_focal_tol_deg if focal_settled
+                                  else params.single_face_tol_deg)
     p.non_manhattan_min_deg = params.non_manhattan_min_deg
     p.merge_deg = params.merge_deg
     p.member_angle_deg = params.member_angle_deg

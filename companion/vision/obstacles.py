@@ -62,6 +62,12 @@ class ObstacleParams:
     # close to horizontal, and the room's V1 ⟂ V2 this close (its other OVP is at a right
     # angle through the focal length); a face seen from below its top, or by its foot:
     # ``noise_px`` at that edge's ends moves its OVP by at most this
+    settled_focal_tol_deg: float = 6.0
+    """... the room's V1 ⟂ V2 this close instead when the focal length is a video's settled
+    running estimate (``focal_settled``): the median of many frames' estimates, so the
+    frame's departure from a right angle is its VPs' noise more than a wrong focal length
+    (a settled frame's VPs are fitted with no orthogonality prior, which would bias the
+    frame's own vote for the focal length)"""
     non_manhattan_min_deg: float = 5.0  # OVPs at least this far from V1 and V2
     merge_deg: float = 3.0  # pairs whose OVPs agree this well are one obstacle
     member_angle_deg: float = 3.0  # a further corner's legs point at the OVPs this well (and a
@@ -111,6 +117,7 @@ def find_obstacles(
     leg_gap_frac: float = 0.15,
     min_leg_angle_deg: float = 12.0,
     noise_px: float = 1.0,
+    focal_settled: bool = False,
 ) -> list[Obstacle]:
     """Obstacles from Table-I corners, best supported first: most consistent corner pairs
     (hypotheses of one box from a stray pair are common, from many pairs rare), then the
@@ -157,14 +164,15 @@ def find_obstacles(
     Inputs: ``segments`` N×4 pixels; ``corners`` already filtered by Table I;
     ``layout`` the frame's layout VPs; ``free`` N bool, segments that may be obstacle
     legs (not V3, not tightly V1/V2); ``labels`` N segment labels (V3 = vertical);
-    ``noise_px`` how far two segment ends may be apart and not be told nearer or farther.
+    ``noise_px`` how far two segment ends may be apart and not be told nearer or farther;
+    ``focal_settled`` whether ``layout.focal_px`` is a video's settled running estimate.
     Output: a list of :class:`Obstacle`, possibly empty.
     """
     p = params or ObstacleParams()
     found = find(segments, corners.points_px, corners.s, corners.n, corners.r, layout.vps,
                  layout.focal_px, layout.centre[0], layout.centre[1], free, labels, V3, p,
                  radius_px, leg_gap_frac, math.sin(math.radians(min_leg_angle_deg)),
-                 layout.observed[V1] and layout.observed[V2], noise_px)
+                 layout.observed[V1] and layout.observed[V2], noise_px, focal_settled)
     obstacles = [Obstacle(*fields) for fields in found]
     obstacles.sort(key=lambda o: (-o.pairs, -o.height_px))  # the first one drives η
     return obstacles

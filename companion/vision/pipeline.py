@@ -631,6 +631,7 @@ class Pipeline:
                 leg_gap_frac=vc.corners.leg_gap_frac,
                 min_leg_angle_deg=vc.corners.min_leg_angle_deg,
                 noise_px=vc.corners.manhattan_leg_noise_px,
+                focal_settled=focal_source == "estimated" and self.running_focal.settled,
             )
             if layout.found
             else []
